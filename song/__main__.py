@@ -1,0 +1,3 @@
+from song.cli import app
+
+app()

@@ -1,0 +1,45 @@
+"""``song scenes check|import|generate``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from song.cli import app
+from song.cli.common import console, handle_errors, status_table
+from song.datasets.scenes import find_scene_packages, load_scene_package
+from song.errors import SongError
+
+scenes_app = typer.Typer(help="Scene packages: validate, import, generate.", no_args_is_help=True)
+app.add_typer(scenes_app, name="scenes")
+
+
+@scenes_app.command("check")
+@handle_errors
+def check(folder: Path = typer.Argument(..., help="a scene package, or a folder of them")) -> None:
+    """Validate scene packages; one line per problem, non-zero exit if any fails."""
+    rows = []
+    for root in find_scene_packages(folder):
+        try:
+            package = load_scene_package(root)
+            smap = package.semantic_map
+            rows.append(
+                {
+                    "scene": smap.scene_id,
+                    "venue": smap.venue_type,
+                    "source": smap.source,
+                    "size": f"{package.occupancy.shape[1]}x{package.occupancy.shape[0]}",
+                    "objects": len(smap.objects),
+                    "status": "ok",
+                    "problem": "",
+                }
+            )
+        except SongError as exc:
+            rows.append({"scene": root.name, "status": "failed", "problem": str(exc)})
+    columns = ["scene", "venue", "source", "size", "objects", "status", "problem"]
+    console.print(status_table(f"scene packages in {folder}", rows, columns))
+    failed = sum(row["status"] == "failed" for row in rows)
+    console.print(f"{len(rows) - failed} ok, {failed} failed")
+    if failed or not rows:
+        raise typer.Exit(1)

@@ -1,0 +1,205 @@
+"""Typed configuration for every stage; defaults are the paper's values (DESIGN §9).
+
+One pydantic model per stage, ``extra="forbid"``, every field with a description, a unit and bounds.
+:func:`load_config` reads TOML or YAML; :func:`config_hash` is recorded in every output.
+Stage owners extend their own section; keep units in field names (``_m``, ``_s``, ``_deg``).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from song.errors import ConfigError
+from song.util import sha256_json
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ScenesConfig(_Section):
+    """Scene package validation and generation."""
+
+    min_free_area_m2: float = Field(4.0, ge=0.0, description="smallest connected free area, m²")
+    min_resolution_m: float = Field(0.01, gt=0.0, description="finest occupancy cell, m")
+    max_resolution_m: float = Field(0.5, gt=0.0, description="coarsest occupancy cell, m")
+    resolution_m: float = Field(0.05, ge=0.01, le=0.5, description="cell size written by importers, m")
+    wall_thickness_m: float = Field(0.1, gt=0.0, le=0.5, description="thickness of imported walls, m")
+
+
+class IntentsConfig(_Section):
+    """Semantic intent generation (paper: "Semantic intent generation")."""
+
+    llm: Literal["auto", "offline", "gemini", "openai"] = Field(
+        "auto", description="auto = gemini when a key is set, else offline"
+    )
+    gemini_model: str = Field("gemini-3-flash-preview", description="closest listed model to 'Gemini 3.1 Flash'")
+    openai_base_url: str = Field("http://127.0.0.1:8000/v1", description="OpenAI-compatible server")
+    openai_model: str = Field("local-model", description="model name sent to the OpenAI-compatible server")
+    timeout_s: float = Field(60.0, gt=0.0, description="per-request timeout, s")
+    max_retries: int = Field(4, ge=0, le=10, description="retries on 408/429/5xx/timeouts")
+    backoff_base_s: float = Field(1.0, ge=0.0, description="first back-off delay, s (doubles, with jitter)")
+    max_concurrency: int = Field(4, ge=1, le=64, description="simultaneous LLM requests across scenes")
+    density_per_m2: float = Field(0.05, gt=0.0, description="pedestrians per m² of navigable area")
+    min_pedestrians: int = Field(2, ge=1, description="fewest pedestrians per scene")
+    max_pedestrians: int = Field(12, ge=1, le=256, description="most pedestrians per scene")
+    min_path_m: float = Field(2.0, ge=0.0, description="shortest accepted geodesic route, m")
+    max_path_m: float = Field(40.0, gt=0.0, description="longest accepted geodesic route, m")
+    min_spawn_separation_m: float = Field(0.8, ge=0.0, description="no two starts closer than this, m")
+    speed_min_mps: float = Field(0.5, gt=0.0, description="pedestrian speed lower bound, m/s (paper)")
+    speed_max_mps: float = Field(1.0, gt=0.0, description="pedestrian speed upper bound, m/s (paper)")
+    max_depart_s: float = Field(3.0, ge=0.0, description="departure times drawn in [0, this], s")
+
+
+class CrowdConfig(_Section):
+    """Navmesh + ORCA crowd planning (paper: Recast/DetourCrowd)."""
+
+    fps: int = Field(30, ge=1, le=240, description="simulation and output rate, frames/s (paper: 30)")
+    agent_radius_m: float = Field(0.25, gt=0.0, le=1.0, description="pedestrian body radius, m")
+    neighbor_dist_m: float = Field(5.0, gt=0.0, description="ORCA neighbour search distance, m")
+    max_neighbors: int = Field(10, ge=1, description="ORCA neighbours considered per agent")
+    time_horizon_s: float = Field(2.0, gt=0.0, description="ORCA agent time horizon, s")
+    time_horizon_obst_s: float = Field(1.0, gt=0.0, description="ORCA obstacle time horizon, s")
+    max_accel_mps2: float = Field(2.0, gt=0.0, description="acceleration clamp, m/s²")
+    max_duration_s: float = Field(120.0, gt=0.0, description="longest simulated scenario, s")
+    stall_time_s: float = Field(2.0, gt=0.0, description="no progress for this long = stalled, s")
+    start_jitter_m: float = Field(0.03, ge=0.0, le=0.2, description="start jitter breaking symmetry, m")
+    contour_error_m: float = Field(0.05, ge=0.0, description="contour simplification tolerance, m")
+
+
+class MotionConfig(_Section):
+    """Full-body motion (paper: Kimodo + trajectory-consistency post-processing)."""
+
+    generator: Literal["auto", "procedural", "kimodo"] = Field("auto", description="motion generator")
+    prompt: str = Field(
+        "A person is casually walking forward at a natural pace with minimal waist sway",
+        description="Kimodo text prompt (paper appendix)",
+    )
+    walk_ratio_m_s: float = Field(0.38, ge=0.3, le=0.45, description="walk ratio WR = L/f, m·s")
+    min_cadence_spm: float = Field(85.0, gt=0.0, description="lowest cadence, steps/min")
+    height_min_m: float = Field(1.50, ge=1.0, description="smallest body height, m")
+    height_max_m: float = Field(1.95, le=2.3, description="largest body height, m")
+    contact_height_m: float = Field(0.05, gt=0.0, description="foot contact height threshold, m")
+    contact_speed_mps: float = Field(0.2, gt=0.0, description="foot contact speed threshold, m/s")
+
+
+class BindingConfig(_Section):
+    """Avatar pool and LBS caches (paper: motion and avatar binding)."""
+
+    n_gaussians: int = Field(20_000, ge=5_000, le=100_000, description="Gaussians per procedural avatar")
+    pool_size: int = Field(64, ge=1, description="identities in the default avatar pool")
+    top_k: int = Field(4, ge=1, le=8, description="skinning influences per Gaussian")
+    materialize: bool = Field(False, description="also write the paper's FP16 per-frame Gaussian cache")
+
+
+class GradingConfig(_Section):
+    """Episode sampling and difficulty grading (paper: episode generation and difficulty grading)."""
+
+    n_episodes: int = Field(500, ge=1, description="episodes in the benchmark (paper: 500)")
+    hard_fraction: float = Field(0.2, ge=0.0, le=1.0, description="paper: 100 of 500")
+    medium_fraction: float = Field(0.4, ge=0.0, le=1.0, description="paper: 200 of 500")
+    robot_radius_m: float = Field(0.2, gt=0.0, description="robot radius for traversability, m")
+    robot_speed_mps: float = Field(0.5, gt=0.0, description="nominal robot speed for T* and encounters, m/s")
+    near_ped_m: float = Field(2.0, gt=0.0, description="co/counter-directional endpoint distance, m")
+    encounter_pass_m: float = Field(1.0, gt=0.0, description="encounter mode: closest pass, m")
+    min_angle_deg: float = Field(90.0, ge=0.0, le=180.0, description="subtended angle at circle centre, deg")
+    turn_threshold_deg: float = Field(40.0, gt=0.0, description="significant heading change, deg")
+    encounter_radius_m: float = Field(3.0, gt=0.0, description="encounter factor radius, m")
+    width_sample_m: float = Field(0.1, gt=0.0, description="corridor-width sampling step, m")
+    max_tries: int = Field(200, ge=1, description="rejection-sampling attempts per episode and mode")
+
+
+class RobotConfig(_Section):
+    """Robot and evaluation loop (paper: Setup; DESIGN §8)."""
+
+    max_speed_mps: float = Field(0.5, gt=0.0, description="linear speed limit, m/s")
+    max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, description="angular speed limit, deg/s")
+    control_hz: float = Field(10.0, gt=0.0, description="control rate, Hz")
+    max_steps: int = Field(200, ge=1, description="T_max, steps")
+    goal_radius_m: float = Field(1.0, gt=0.0, description="success distance, m")
+    max_obstacle_collisions: int = Field(5, ge=1, description="δ_obs: failure at this many, count")
+    radius_m: float = Field(0.2, gt=0.0, description="collision radius, m")
+    collision_height_m: float = Field(0.8, ge=0.0, description="centre height of the collision volume, m")
+    collision_volume: Literal["sphere", "cylinder"] = Field("sphere", description="avatar collision volume")
+    eta_col: int = Field(5, ge=0, description="η_col: collision when Gaussian count exceeds this")
+    psc_threshold_m: float = Field(0.5, gt=0.0, description="personal-space threshold, m")
+    stuck_steps: int = Field(10, ge=1, description="no motion for this many steps = stuck, steps")
+    fov_deg: float = Field(70.0, gt=0.0, le=360.0, description="horizontal field of view, deg")
+
+
+class CameraConfig(_Section):
+    """RGB-D camera of the paper's setup (declared for a renderer backend)."""
+
+    height_m: float = Field(0.8, ge=0.0, description="camera height, m")
+    hfov_deg: float = Field(70.0, gt=0.0, lt=180.0, description="horizontal field of view, deg")
+    near_m: float = Field(0.01, gt=0.0, description="near plane, m")
+    far_m: float = Field(100.0, gt=0.0, description="far plane, m")
+    width_px: int = Field(960, ge=1, description="image width, px")
+    height_px: int = Field(540, ge=1, description="image height, px")
+
+
+class SongConfig(_Section):
+    """Everything a run needs. ``seed`` is the one run seed (DESIGN §3)."""
+
+    seed: int = Field(0, ge=0, description="run seed")
+    scenes: ScenesConfig = ScenesConfig()
+    intents: IntentsConfig = IntentsConfig()
+    crowd: CrowdConfig = CrowdConfig()
+    motion: MotionConfig = MotionConfig()
+    binding: BindingConfig = BindingConfig()
+    grading: GradingConfig = GradingConfig()
+    robot: RobotConfig = RobotConfig()
+    camera: CameraConfig = CameraConfig()
+
+
+def config_hash(config: BaseModel) -> str:
+    """sha256 of a config's canonical JSON; written into every output that the config shaped."""
+    return sha256_json(config.model_dump(mode="json"))
+
+
+def _read_mapping(path: Path) -> dict[str, Any]:
+    suffix = path.suffix.lower()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, "", f"cannot read config: {exc}") from exc
+    try:
+        if suffix == ".toml":
+            data = tomllib.loads(text)
+        elif suffix in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text) or {}
+        else:
+            raise ConfigError(path, "", "expected a .toml, .yaml or .yml file")
+    except ConfigError:
+        raise
+    except Exception as exc:  # tomllib / yaml parse errors
+        raise ConfigError(path, "", f"not valid {suffix[1:].upper()}: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ConfigError(path, "", "expected a mapping at the top level")
+    return data
+
+
+def load_config(path: str | Path | None = None, **overrides: Any) -> SongConfig:
+    """Load a :class:`SongConfig` from TOML/YAML (or defaults when ``path`` is None).
+
+    ``overrides`` are top-level keys (``seed=3``) or ``section={...}`` dicts merged over the file.
+    Raises :class:`ConfigError` naming the file and the first bad field.
+    """
+    data: dict[str, Any] = {} if path is None else _read_mapping(Path(path))
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(data.get(key), dict):
+            data[key] = {**data[key], **value}
+        else:
+            data[key] = value
+    try:
+        return SongConfig.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        field = ".".join(str(part) for part in first["loc"])
+        raise ConfigError(path or "<config>", field, first["msg"]) from exc

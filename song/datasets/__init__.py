@@ -1,0 +1,1 @@
+"""Data formats: scene packages (input) and benchmark releases (output)."""
