@@ -1,0 +1,74 @@
+"""The intents stage's artifact: ``intents.json`` (DESIGN §5.1).
+
+CONTRACT: later stages read it with :func:`load_intents`; fields below are stable.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from song.errors import StageError
+
+INTENTS_FILE = "intents.json"
+INTENTS_SCHEMA_VERSION = 1
+
+
+class Provenance(BaseModel):
+    """Who proposed an intent."""
+
+    model_config = ConfigDict(extra="forbid")
+    provider: Literal["offline", "gemini", "openai"]
+    model: str
+    fallback: bool = Field(False, description="True when the LLM failed and the offline model was used")
+    prompt_sha256: str = ""
+
+
+class Intent(BaseModel):
+    """One executable pedestrian routine. Points are world metres (Z-up), times seconds."""
+
+    model_config = ConfigDict(extra="forbid")
+    id: int = Field(..., ge=0, description="pedestrian id within the scene")
+    activity: str
+    start_object: str
+    goal_object: str
+    start_xy: tuple[float, float]
+    goal_xy: tuple[float, float]
+    speed: float = Field(..., gt=0.0, description="preferred walking speed, m/s")
+    depart_time: float = Field(..., ge=0.0, description="departure time after scenario start, s")
+    geodesic_m: float = Field(0.0, ge=0.0, description="grid shortest-path length start→goal, m")
+    provenance: Provenance
+
+
+class RejectedIntent(BaseModel):
+    """A raw proposal that did not become an intent, with a reason code."""
+
+    model_config = ConfigDict(extra="forbid")
+    activity: str = ""
+    start_object: str = ""
+    goal_object: str = ""
+    reason: str = Field(..., description="unknown_object | unreachable | too_short | too_long | duplicate | ...")
+    detail: str = ""
+
+
+class IntentSet(BaseModel):
+    """Everything the intents stage decided for one scene."""
+
+    model_config = ConfigDict(extra="forbid")
+    schema_version: int = INTENTS_SCHEMA_VERSION
+    scene_id: str
+    provenance: Provenance
+    description: str = Field("", description="prompt A's human-centric scene description")
+    intents: list[Intent]
+    rejected: list[RejectedIntent] = []
+
+
+def load_intents(scene_dir: str | Path) -> IntentSet:
+    """Read ``RUN/scenes/<id>/intents.json``."""
+    path = Path(scene_dir) / INTENTS_FILE
+    try:
+        return IntentSet.model_validate_json(path.read_bytes())
+    except (OSError, ValueError) as exc:
+        raise StageError(f"{path}: cannot read intents: {exc}") from exc

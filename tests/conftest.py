@@ -1,0 +1,72 @@
+"""Shared fixtures: a factory for tiny valid scene packages (two rooms joined by a door)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.datasets.scenes import Region, SceneObject, SemanticMap, write_scene_package
+from song.datasets.scenes.model import OccupancySpec
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def build_two_room_scene(root: Path, scene_id: str = "tiny", resolution: float = 0.05) -> Path:
+    """An 8 m × 4 m scene: two 4 m rooms, a 1 m door in the dividing wall, a few objects.
+
+    Walls are 0.1 m thick around the border and between the rooms (x = 4 m).
+    """
+    width, height = 8.0, 4.0
+    cols, rows = round(width / resolution), round(height / resolution)
+    cells = np.full((rows, cols), 255, dtype=np.uint8)
+    wall = max(1, round(0.1 / resolution))
+    cells[:wall, :] = cells[-wall:, :] = 0
+    cells[:, :wall] = cells[:, -wall:] = 0
+    mid = cols // 2
+    cells[:, mid - wall // 2 - 1 : mid + wall // 2 + 1] = 0
+    door_lo, door_hi = round(1.5 / resolution), round(2.5 / resolution)
+    cells[rows - door_hi : rows - door_lo, mid - wall // 2 - 1 : mid + wall // 2 + 1] = 255
+    # a desk in room A and a sofa in room B, rasterised as occupied
+    desk = [(1.0, 0.5), (2.0, 0.5), (2.0, 1.0), (1.0, 1.0)]
+    sofa = [(6.0, 3.0), (7.2, 3.0), (7.2, 3.5), (6.0, 3.5)]
+    for (x0, y0), _, (x1, y1), _ in (desk, sofa):
+        c0, c1 = round(x0 / resolution), round(x1 / resolution)
+        r0, r1 = rows - round(y1 / resolution), rows - round(y0 / resolution)
+        cells[r0:r1, c0:c1] = 0
+    smap = SemanticMap(
+        scene_id=scene_id,
+        venue_type="office",
+        source="procedural",
+        bounds=(0.0, 0.0, width, height),
+        occupancy=OccupancySpec(resolution=resolution, origin=(0.0, 0.0)),
+        regions=[
+            Region(id="room_a", type="open_office", polygon=[(0, 0), (4, 0), (4, 4), (0, 4)]),
+            Region(id="room_b", type="lounge", polygon=[(4, 0), (8, 0), (8, 4), (4, 4)]),
+        ],
+        objects=[
+            SceneObject(id="desk_1", label="desk", category="workstation", footprint=desk, z_max=0.75, region="room_a"),
+            SceneObject(id="sofa_1", label="sofa", category="seating", footprint=sofa, z_max=0.8, region="room_b"),
+            SceneObject(
+                id="printer_1",
+                label="printer",
+                category="equipment",
+                footprint=[(0.2, 3.2), (0.7, 3.2), (0.7, 3.7), (0.2, 3.7)],
+                z_max=1.0,
+                region="room_a",
+            ),
+        ],
+    )
+    return write_scene_package(root / scene_id, smap, cells)
+
+
+@pytest.fixture
+def make_scene(tmp_path: Path) -> Callable[..., Path]:
+    """Factory: ``make_scene(scene_id="tiny", resolution=0.05) -> Path`` of a valid package."""
+
+    def factory(scene_id: str = "tiny", resolution: float = 0.05, root: Path | None = None) -> Path:
+        return build_two_room_scene(root or tmp_path / "scenes", scene_id, resolution)
+
+    return factory
