@@ -1,0 +1,139 @@
+"""Typed episodes that a benchmark release hands to the runtime (DESIGN §7, §8).
+
+CONTRACT between ``song.datasets.bench`` (which builds these from Parquet + blobs) and
+``song.runtime`` (which only reads them). Arrays are numpy; units are SI; world frame Z-up.
+
+Pedestrian presence: a pedestrian exists for the whole scenario. Before its first trajectory sample
+it stands at its first pose, after its last sample it stands at its last pose (people wait at the
+object they start from and stay at the one they reach). This is the runtime's documented choice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class StaticMap:
+    """The static occupancy map of a scene.
+
+    Attributes:
+        cells: (rows, cols) uint8; 255 free, 0 occupied, 127 unknown (unknown is not traversable).
+        resolution: metres per cell.
+        origin: (x_min, y_min) of the lower-left corner, metres; mapping as DESIGN §4.1.
+    """
+
+    cells: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+
+    @property
+    def free(self) -> np.ndarray:
+        """(rows, cols) bool."""
+        return self.cells == 255
+
+
+@dataclass(frozen=True)
+class PedestrianTrack:
+    """One pedestrian's planned root trajectory at 30 FPS.
+
+    Attributes:
+        ped_id: id within the scene.
+        t: (T,) float64 scenario time, s (increasing, 1/fps apart).
+        xy: (T, 2) float64 root position, m.
+        yaw: (T,) float64 heading, rad, CCW from +x.
+    """
+
+    ped_id: int
+    t: np.ndarray
+    xy: np.ndarray
+    yaw: np.ndarray
+
+
+@dataclass(frozen=True)
+class AvatarBinding:
+    """Where a pedestrian's avatar and its skinning cache live (files inside the release's blobs).
+
+    Attributes:
+        ped_id: pedestrian id within the scene.
+        avatar_id: identity id in the avatar pool.
+        asset_path: avatar asset file (canonical Gaussians + skinning), read by ``song.datasets.avatars``.
+        cache_path: compact LBS cache (root + joint rotations per frame), posed by ``song.geometry.lbs``.
+    """
+
+    ped_id: int
+    avatar_id: str
+    asset_path: Path | None
+    cache_path: Path | None
+
+
+@dataclass(frozen=True)
+class Episode:
+    """A point-goal social-navigation episode with everything the runtime needs.
+
+    Attributes:
+        episode_id: stable id.
+        scene_id: scene package id.
+        difficulty: "easy" | "medium" | "hard".
+        mode: sampling mode ("co_directional", "counter_directional", "encounter", "random").
+        seed: episode seed.
+        start_xy: (2,) float64 m; start_yaw rad.
+        goal_xy: (2,) float64 m; goal_radius m (success when closer).
+        geodesic_distance: L*, smoothed A* length, m.
+        optimal_time: T* = L* / 0.5 m/s, s.
+        t0: scenario time at which the robot starts, s.
+        path: (K, 2) float64 smoothed A* path, m.
+        factors: the four grading factors, bins and score.
+        static_map: the occupancy map.
+        pedestrians: the scene's pedestrian tracks.
+        avatars: avatar bindings, one per pedestrian that has one.
+    """
+
+    episode_id: str
+    scene_id: str
+    difficulty: str
+    mode: str
+    seed: int
+    start_xy: np.ndarray
+    start_yaw: float
+    goal_xy: np.ndarray
+    goal_radius: float
+    geodesic_distance: float
+    optimal_time: float
+    t0: float
+    path: np.ndarray
+    static_map: StaticMap
+    pedestrians: list[PedestrianTrack] = field(default_factory=list)
+    avatars: list[AvatarBinding] = field(default_factory=list)
+    factors: dict[str, float] = field(default_factory=dict)
+
+
+def pedestrian_states(tracks: list[PedestrianTrack], t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pedestrian root states at scenario time ``t`` (linear interpolation between samples).
+
+    Returns:
+        ``(ids (P,) int64, xy (P, 2) float64 m, velocity (P, 2) float64 m/s)``; positions clamp to
+        the first/last sample outside a track's time span (velocity 0 there).
+    """
+    n = len(tracks)
+    ids = np.empty(n, dtype=np.int64)
+    xy = np.zeros((n, 2))
+    vel = np.zeros((n, 2))
+    for i, track in enumerate(tracks):
+        ids[i] = track.ped_id
+        times = track.t
+        if t <= times[0] or len(times) == 1:
+            xy[i] = track.xy[0] if t <= times[0] else track.xy[-1]
+            continue
+        if t >= times[-1]:
+            xy[i] = track.xy[-1]
+            continue
+        k = int(np.searchsorted(times, t, side="right")) - 1
+        dt = times[k + 1] - times[k]
+        w = (t - times[k]) / dt
+        xy[i] = (1.0 - w) * track.xy[k] + w * track.xy[k + 1]
+        vel[i] = (track.xy[k + 1] - track.xy[k]) / dt
+    return ids, xy, vel
