@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -97,7 +98,14 @@ def register_stage(stage: Stage) -> Stage:
 
 
 def load_stages() -> list[Stage]:
-    """Import the stage modules that exist and return the registered stages in pipeline order."""
+    """Import the stage modules that exist and return the registered stages in pipeline order.
+
+    Extra stage modules (plugins) can be named in the ``SONG_STAGE_PLUGINS`` environment variable
+    (comma-separated module names); they run after the built-in stages.
+    """
+    plugins = tuple(name for name in os.environ.get("SONG_STAGE_PLUGINS", "").split(",") if name.strip())
+    for module in plugins:
+        importlib.import_module(module.strip())
     for module in STAGE_MODULES:
         try:
             importlib.import_module(module)
@@ -223,20 +231,79 @@ def _run_scene_job(args: tuple[str, str, str, tuple[str, ...] | None]) -> dict[s
     return run_scene(Path(scene_root), Path(run_dir), config, names).to_json()
 
 
+ExecutorName = Literal["serial", "process", "dask"]
+
+
+def _map_serial(jobs: list[tuple], workers: int, scheduler: str | None) -> Iterator[dict[str, Any]]:
+    for job in jobs:
+        yield _run_scene_job(job)
+
+
+def _map_process(jobs: list[tuple], workers: int, scheduler: str | None) -> Iterator[dict[str, Any]]:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    # spawn, not fork: workers start clean (no inherited torch/OpenMP state or open handles).
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = [pool.submit(_run_scene_job, job) for job in jobs]
+        for future in as_completed(futures):
+            yield future.result()
+
+
+def _map_dask(jobs: list[tuple], workers: int, scheduler: str | None) -> Iterator[dict[str, Any]]:
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:
+        from song.errors import MissingDependencyError
+
+        raise MissingDependencyError("dask.distributed", "dask") from exc
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = [client.submit(_run_scene_job, job, pure=False) for job in jobs]
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+EXECUTORS: dict[str, Callable[[list[tuple], int, str | None], Iterator[dict[str, Any]]]] = {
+    "serial": _map_serial,
+    "process": _map_process,
+    "dask": _map_dask,
+}
+
+
 def iter_run(
     scenes_dir: str | Path,
     run_dir: str | Path,
     config: SongConfig,
     stage_names: Iterable[str] | None = None,
     workers: int = 1,
+    executor: ExecutorName = "process",
+    scheduler: str | None = None,
+    scene_ids: Iterable[str] | None = None,
 ) -> Iterator[SceneResult]:
     """Run the chain over every scene package in ``scenes_dir``, yielding results as scenes finish.
 
-    ``workers`` > 1 uses a local process pool; results do not depend on it (DESIGN §3).
+    A scene is the unit of work. ``executor`` is ``serial``, ``process`` (a local pool of
+    ``workers`` processes; serial when ``workers`` is 1) or ``dask`` (``scheduler`` address such as
+    ``tcp://host:8786``, or an in-process ``LocalCluster`` of ``workers`` when None). Outputs do not
+    depend on the executor, the worker count or the completion order (DESIGN §3).
     """
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     roots = find_scene_packages(scenes_dir)
+    if scene_ids is not None:
+        wanted = set(scene_ids)
+        roots = [root for root in roots if root.name in wanted]
     write_json_atomic(
         run_dir / RUN_FILE,
         {
@@ -248,18 +315,12 @@ def iter_run(
     )
     names = tuple(stage_names) if stage_names is not None else None
     jobs = [(str(root), str(run_dir), config.model_dump_json(), names) for root in roots]
-    if workers <= 1 or len(jobs) <= 1:
-        for job in jobs:
-            yield _result_from_json(_run_scene_job(job))
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = [pool.submit(_run_scene_job, job) for job in jobs]
-        for future in as_completed(futures):
-            yield _result_from_json(future.result())
+    if executor not in EXECUTORS:
+        raise StageError(f"unknown executor '{executor}'; choose one of {', '.join(EXECUTORS)}")
+    if executor == "process" and (workers <= 1 or len(jobs) <= 1):
+        executor = "serial"
+    for data in EXECUTORS[executor](jobs, workers, scheduler):
+        yield _result_from_json(data)
 
 
 def _result_from_json(data: dict[str, Any]) -> SceneResult:

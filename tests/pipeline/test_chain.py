@@ -1,0 +1,73 @@
+"""Stage chain: skip when unchanged, rerun when inputs change, failure isolation, determinism."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from song.config import SongConfig
+from song.pipeline.chain import iter_run
+
+STAGES = ["dummy_first", "dummy_second"]
+
+
+@pytest.fixture(autouse=True)
+def _plugins(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SONG_STAGE_PLUGINS", "tests.pipeline._dummy_stages")
+
+
+def _tree(root: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(root)): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != "run.json"
+    }
+
+
+def _run(scenes: Path, run: Path, cfg: SongConfig, **kw) -> dict[str, object]:
+    return {r.scene_id: r for r in iter_run(scenes, run, cfg, STAGES, **kw)}
+
+
+def test_rerun_skips_and_changes_rerun(make_scene, tmp_path: Path) -> None:
+    make_scene("a")
+    make_scene("b")
+    scenes, run = tmp_path / "scenes", tmp_path / "run"
+    first = _run(scenes, run, SongConfig())
+    assert {r.status for r in first.values()} == {"ok"}
+    again = _run(scenes, run, SongConfig())
+    assert all(r.stages == {"dummy_first": "skipped", "dummy_second": "skipped"} for r in again.values())
+    # a damaged output is detected and rebuilt, downstream stays skipped because bytes are identical
+    (run / "scenes/a/first.json").write_text("{}")
+    repaired = _run(scenes, run, SongConfig())
+    assert repaired["a"].stages == {"dummy_first": "ok", "dummy_second": "skipped"}
+    # a new seed changes every stage's input hash
+    reseeded = _run(scenes, run, SongConfig(seed=5))
+    assert reseeded["b"].stages == {"dummy_first": "ok", "dummy_second": "ok"}
+    record = json.loads((run / "scenes/b/stages.json").read_text())
+    assert set(record) == set(STAGES) and record["dummy_second"]["outputs"].keys() == {"second.npz"}
+
+
+def test_bad_scene_fails_alone(make_scene, tmp_path: Path) -> None:
+    make_scene("good")
+    bad = make_scene("broken")
+    (bad / "semantic_map.json").write_text('{"format": "song.semantic_map", "version": 1}')
+    library = make_scene("lib")
+    text = (library / "semantic_map.json").read_text().replace('"office"', '"library"')
+    (library / "semantic_map.json").write_text(text)
+    results = _run(tmp_path / "scenes", tmp_path / "run", SongConfig())
+    assert results["good"].status == "ok"
+    assert results["broken"].status == "failed" and "semantic_map.json" in results["broken"].error
+    assert results["lib"].status == "failed" and results["lib"].stages == {"dummy_first": "failed"}
+    assert "venue_type" in results["lib"].error
+
+
+def test_workers_do_not_change_bytes(make_scene, tmp_path: Path) -> None:
+    for name in ("a", "b", "c"):
+        make_scene(name)
+    scenes = tmp_path / "scenes"
+    _run(scenes, tmp_path / "serial", SongConfig(seed=3), executor="serial")
+    _run(scenes, tmp_path / "pool", SongConfig(seed=3), executor="process", workers=2)
+    assert _tree(tmp_path / "serial") == _tree(tmp_path / "pool")
+    assert len(_tree(tmp_path / "serial")) == 9
