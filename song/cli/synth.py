@@ -103,9 +103,11 @@ def synth(
     executor: str = typer.Option("process", "--executor", help="serial | process | dask"),
     scheduler: str | None = typer.Option(None, "--scheduler", help="dask scheduler, e.g. tcp://host:8786"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="JSON line per scene instead of progress bars"),
+    stages: str | None = typer.Option(None, "--stages", help="comma-separated subset of stages (default: all)"),
 ) -> None:
     """Run every registered per-scene stage on every scene package (resumable, parallel)."""
     cfg = make_config(config, seed)
-    results = run_chain_command(scenes, out, cfg, None, workers or default_workers(), executor, scheduler, quiet)
+    names = [name.strip() for name in stages.split(",")] if stages else None
+    results = run_chain_command(scenes, out, cfg, names, workers or default_workers(), executor, scheduler, quiet)
     if any(r.status == "failed" for r in results):
         raise typer.Exit(1)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import time
+
 import numpy as np
 
 from song.errors import SceneError
@@ -12,6 +15,7 @@ from song.util import write_json_atomic, write_npz_atomic
 def _first(ctx: StageContext) -> list[str]:
     if ctx.scene.semantic_map.venue_type == "library":  # the "corrupted" scene of the tests
         raise SceneError(ctx.scene.root / "semantic_map.json", "venue_type", "dummy stage refuses libraries")
+    time.sleep(float(os.environ.get("SONG_DUMMY_SLEEP", "0")))
     free = int(ctx.scene.occupancy.free.sum())
     write_json_atomic(ctx.scene_dir / "first.json", {"free": free, "draw": int(ctx.rng("a").integers(1 << 30))})
     return ["first.json"]

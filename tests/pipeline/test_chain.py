@@ -71,3 +71,40 @@ def test_workers_do_not_change_bytes(make_scene, tmp_path: Path) -> None:
     _run(scenes, tmp_path / "pool", SongConfig(seed=3), executor="process", workers=2)
     assert _tree(tmp_path / "serial") == _tree(tmp_path / "pool")
     assert len(_tree(tmp_path / "serial")) == 9
+
+
+def test_dask_local_cluster_gives_identical_bytes(make_scene, tmp_path: Path) -> None:
+    pytest.importorskip("dask.distributed")
+    for name in ("a", "b"):
+        make_scene(name)
+    scenes = tmp_path / "scenes"
+    _run(scenes, tmp_path / "serial", SongConfig(seed=4), executor="serial")
+    _run(scenes, tmp_path / "dask", SongConfig(seed=4), executor="dask", workers=2)
+    assert _tree(tmp_path / "serial") == _tree(tmp_path / "dask")
+
+
+def test_kill_and_resume_gives_identical_bytes(make_scene, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    for index in range(6):
+        make_scene(f"s{index}")
+    scenes = tmp_path / "scenes"
+    _run(scenes, tmp_path / "clean", SongConfig(), executor="serial")
+    env = {**os.environ, "SONG_DUMMY_SLEEP": "0.4", "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    command = [sys.executable, "-m", "song", "synth", "--scenes", str(scenes), "--out", str(tmp_path / "killed")]
+    options = ["--workers", "1", "--quiet", "--stages", ",".join(STAGES)]
+    proc = subprocess.Popen([*command, *options], env=env, stdout=subprocess.PIPE)
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list((tmp_path / "killed").glob("scenes/*/first.json"))) < 2:
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done_before = len(list((tmp_path / "killed").glob("scenes/*/second.npz")))
+    assert 0 < done_before < 6
+    resumed = _run(scenes, tmp_path / "killed", SongConfig(), executor="serial")
+    assert sum(r.stages.get("dummy_first") == "skipped" for r in resumed.values()) >= done_before
+    assert _tree(tmp_path / "clean") == _tree(tmp_path / "killed")
