@@ -1,0 +1,307 @@
+"""``song export-bench``: a run's graded episodes → one immutable versioned release (DESIGN §7).
+
+The release is built in a hidden temporary folder beside the target and renamed into place at the
+end, so an interrupted export leaves no half version visible; an existing version is never touched.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+import song
+from song.datasets.bench.info import SEMVER, Generator, Info, TableInfo
+from song.datasets.bench.io import BlobStore, write_parquet
+from song.datasets.bench.schema import (
+    AVATARS,
+    AVATARS_PATH,
+    CHANGELOG_PATH,
+    EPISODES,
+    EPISODES_PATH,
+    INFO_PATH,
+    MANIFEST,
+    MANIFEST_PATH,
+    PEDESTRIANS,
+    PEDESTRIANS_PATH,
+    SCENES,
+    SCENES_PATH,
+)
+from song.datasets.scenes.package import GAUSSIANS, SEMANTIC_MAP, USD_PROXY, load_scene_package
+from song.errors import BenchmarkError
+from song.util import sha256_bytes, sha256_file, write_json_atomic
+
+GRADING_MANIFEST = "manifest/episodes.parquet"
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """Where the release went and what it holds."""
+
+    path: Path
+    version: str
+    fingerprint: str
+    n_episodes: int
+    n_bytes: int
+
+
+def yaw_to_quat_xyzw(yaw: np.ndarray) -> np.ndarray:
+    """Quaternions [x, y, z, w] of rotations by ``yaw`` (rad) about +z; (N,) → (N, 4)."""
+    yaw = np.asarray(yaw, dtype=np.float64)
+    return np.stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)], axis=-1)
+
+
+def _run_inputs(run_dir: Path) -> tuple[dict[str, Any], Path]:
+    try:
+        run = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise BenchmarkError(f"{run_dir / 'run.json'}: not a run folder: {exc}") from exc
+    return run, Path(run["scenes_dir"])
+
+
+def _episode_table(run_dir: Path, config_sha: str, goal_radius: float) -> pa.Table:
+    path = run_dir / GRADING_MANIFEST
+    if not path.is_file():
+        raise BenchmarkError(f"{path}: missing; run `song grade --run {run_dir}` first")
+    src = pq.read_table(path).to_pydict()
+    n = len(src["episode_id"])
+    start = np.column_stack([src["start_x"], src["start_y"], np.zeros(n)]) if n else np.zeros((0, 3))
+    goal = np.column_stack([src["goal_x"], src["goal_y"], np.zeros(n)]) if n else np.zeros((0, 3))
+    columns = {
+        "episode_id": src["episode_id"],
+        "scene_id": src["scene_id"],
+        "difficulty": src["difficulty"],
+        "mode": src["mode"],
+        "seed": src["seed"],
+        "t0": src["t0"],
+        "start_position": start.tolist(),
+        "start_yaw": src["start_yaw"],
+        "start_rotation": yaw_to_quat_xyzw(np.asarray(src["start_yaw"], dtype=np.float64)).tolist(),
+        "goal_position": goal.tolist(),
+        "goal_radius": [goal_radius] * n,
+        "goals": [[{"position": g, "radius": goal_radius}] for g in goal.tolist()],
+        "geodesic_distance": src["geodesic_distance"],
+        "optimal_time": src["optimal_time"],
+        "path": src["path"],
+        "path_length": src["path_length"],
+        "n_turns": src["n_turns"],
+        "n_encounters": src["n_encounters"],
+        "corridor_width": src["corridor_width"],
+        "bin_length": src["bin_length"],
+        "bin_turns": src["bin_turns"],
+        "bin_encounters": src["bin_encounters"],
+        "bin_width": src["bin_width"],
+        "score": src["score"],
+        "n_pedestrians": [len(ids) for ids in src["pedestrian_ids"]],
+        "pedestrian_ids": src["pedestrian_ids"],
+        "config_sha256": [config_sha] * n,
+    }
+    return pa.table(columns).cast(EPISODES).sort_by("episode_id")
+
+
+def _pedestrian_table(run_dir: Path, scene_ids: list[str]) -> pa.Table:
+    parts = []
+    for scene_id in scene_ids:
+        path = run_dir / "scenes" / scene_id / "crowd.parquet"
+        if not path.is_file():
+            raise BenchmarkError(f"{path}: missing; run `song synth` on this scene")
+        table = pq.read_table(path)
+        table = table.append_column("scene_id", pa.array([scene_id] * table.num_rows, pa.string()))
+        parts.append(table.select(PEDESTRIANS.names).cast(PEDESTRIANS))
+    table = pa.concat_tables(parts) if parts else PEDESTRIANS.empty_table()
+    return table.sort_by([("scene_id", "ascending"), ("ped_id", "ascending"), ("frame", "ascending")])
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def _avatar_rows(run_dir: Path, scene_id: str, ped_ids: list[int], blobs: BlobStore) -> list[dict[str, Any]]:
+    scene_dir = run_dir / "scenes" / scene_id
+    intents = {item["id"]: item for item in _read_json(scene_dir / "intents.json").get("intents", [])}
+    bindings = {
+        int(item["ped_id"]): item for item in _read_json(scene_dir / "binding" / "bindings.json").get("pedestrians", [])
+    }
+    rows = []
+    for ped_id in ped_ids:
+        binding = bindings.get(ped_id, {})
+        amass_dir = scene_dir / "human_amass" / f"traj_{ped_id}"
+        meta = _read_json(amass_dir / "meta.json")
+        asset = binding.get("asset_path")
+        materialized = binding.get("materialized_file")
+        rows.append(
+            {
+                "scene_id": scene_id,
+                "ped_id": ped_id,
+                "avatar_id": binding.get("avatar_id", ""),
+                "activity": intents.get(ped_id, {}).get("activity", ""),
+                "height_m": float(binding.get("height_m", meta.get("height_m", float("nan")))),
+                "cache": blobs.add(scene_dir / binding["cache_file"]) if "cache_file" in binding else None,
+                "asset": blobs.add(Path(asset)) if asset else None,
+                "amass": blobs.add(amass_dir / "motion_amass.npz"),
+                "materialized": blobs.add(scene_dir / materialized) if materialized else None,
+            }
+        )
+    return rows
+
+
+def _scene_row(scenes_dir: Path, scene_id: str, blobs: BlobStore) -> dict[str, Any]:
+    package = load_scene_package(scenes_dir / scene_id)
+    smap = package.semantic_map
+    grid = package.occupancy
+    return {
+        "scene_id": scene_id,
+        "source": smap.source,
+        "source_sha256": sha256_file(package.root / SEMANTIC_MAP),
+        "venue_type": smap.venue_type,
+        "navigable_area_m2": float(grid.free.sum()) * grid.resolution**2,
+        "licence": smap.licence or "",
+        "resolution": grid.resolution,
+        "origin": list(grid.origin),
+        "semantic_map": blobs.add(package.root / SEMANTIC_MAP),
+        "occupancy": blobs.add(package.root / smap.occupancy.path),
+        "gaussians": blobs.add(package.root / GAUSSIANS),
+        "usd": blobs.add(package.root / USD_PROXY),
+    }
+
+
+def _git_commit() -> str:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=Path(song.__file__).parent, capture_output=True, text=True, timeout=5
+        )
+        return out.stdout.strip() if out.returncode == 0 else ""
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def _created() -> str:
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    moment = dt.datetime.fromtimestamp(int(epoch), dt.UTC) if epoch else dt.datetime.now(dt.UTC)
+    return moment.replace(microsecond=0).isoformat().replace("+00:00", "Z")
+
+
+def manifest_rows(release: Path, rows_by_path: dict[str, int]) -> list[dict[str, Any]]:
+    """One row per file of the release except ``meta/info.json`` and the manifest itself, sorted."""
+    rows = []
+    for path in sorted(release.rglob("*")):
+        rel = path.relative_to(release).as_posix()
+        if not path.is_file() or rel in (INFO_PATH, MANIFEST_PATH):
+            continue
+        rows.append(
+            {"path": rel, "sha256": sha256_file(path), "bytes": path.stat().st_size, "rows": rows_by_path.get(rel)}
+        )
+    return rows
+
+
+def fingerprint_of(rows: list[dict[str, Any]]) -> str:
+    """sha256 of the sorted manifest's canonical text (``path sha256 bytes`` per line)."""
+    text = "".join(f"{r['path']}\t{r['sha256']}\t{r['bytes']}\n" for r in sorted(rows, key=lambda r: r["path"]))
+    return sha256_bytes(text.encode("utf-8"))
+
+
+def _changelog(version: str, parent: str | None, notes: str, counts: dict[str, Any]) -> str:
+    lines = [f"# {version}", "", f"- parent: {parent or 'none'}", f"- episodes: {counts['episodes']}"]
+    lines += [f"- {name}: {count}" for name, count in counts["difficulty"].items()]
+    if notes:
+        lines += ["", notes.strip()]
+    return "\n".join(lines) + "\n"
+
+
+def export_bench(
+    run_dir: str | Path, bench_dir: str | Path, version: str, parent: str | None = None, notes: str = ""
+) -> ExportResult:
+    """Write ``bench_dir/version/`` from a graded run; refuses an existing version.
+
+    Raises:
+        BenchmarkError: bad version string, existing version, missing parent, or missing run outputs.
+    """
+    run_dir, bench_dir = Path(run_dir), Path(bench_dir)
+    if not SEMVER.match(version):
+        raise BenchmarkError(f"version '{version}': expected a semantic version X.Y.Z")
+    target = bench_dir / version
+    if target.exists():
+        raise BenchmarkError(f"{target}: version {version} already exists; releases are immutable, pick a new version")
+    if parent is not None and not (bench_dir / parent / INFO_PATH).is_file():
+        raise BenchmarkError(f"{bench_dir / parent}: parent version {parent} does not exist")
+    run, scenes_dir = _run_inputs(run_dir)
+    config = run["config"]
+    robot = config["robot"]
+    episodes = _episode_table(run_dir, run["config_sha256"], float(robot["goal_radius_m"]))
+    scene_ids = sorted(set(episodes.column("scene_id").to_pylist()))
+    tmp = bench_dir / f".{version}.tmp-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    try:
+        blobs = BlobStore(tmp)
+        pedestrians = _pedestrian_table(run_dir, scene_ids)
+        avatar_rows, scene_rows = [], []
+        for scene_id in scene_ids:
+            mask = pc.equal(pedestrians.column("scene_id"), scene_id)
+            ped_ids = sorted(set(pedestrians.filter(mask).column("ped_id").to_pylist()))
+            avatar_rows += _avatar_rows(run_dir, scene_id, ped_ids, blobs)
+            scene_rows.append(_scene_row(scenes_dir, scene_id, blobs))
+        tables = {
+            "episodes": (EPISODES_PATH.format(part=0), episodes, EPISODES),
+            "pedestrians": (PEDESTRIANS_PATH.format(part=0), pedestrians, PEDESTRIANS),
+            "avatars": (AVATARS_PATH.format(part=0), pa.Table.from_pylist(avatar_rows, AVATARS), AVATARS),
+            "scenes": (SCENES_PATH, pa.Table.from_pylist(scene_rows, SCENES), SCENES),
+        }
+        rows_by_path = {}
+        for name, (rel, table, schema) in tables.items():
+            rows_by_path[rel] = write_parquet(tmp / rel, table, schema, name, version)
+        difficulty = episodes.column("difficulty").to_pylist()
+        mode = episodes.column("mode").to_pylist()
+        counts = {
+            "episodes": episodes.num_rows,
+            "scenes": len(scene_ids),
+            "pedestrians": len(avatar_rows),
+            "difficulty": {d: difficulty.count(d) for d in ("easy", "medium", "hard")},
+            "mode": {m: mode.count(m) for m in sorted(set(mode))},
+        }
+        (tmp / CHANGELOG_PATH).write_text(_changelog(version, parent, notes, counts), encoding="utf-8")
+        manifest = manifest_rows(tmp, rows_by_path)
+        write_parquet(tmp / MANIFEST_PATH, pa.Table.from_pylist(manifest, MANIFEST), MANIFEST, "manifest", version)
+        fingerprint = fingerprint_of(manifest)
+        info = Info(
+            dataset_version=version,
+            parent=parent,
+            notes=notes,
+            created=_created(),
+            generator=Generator(version=song.__version__, git_commit=_git_commit(), config_sha256=run["config_sha256"]),
+            robot=robot,
+            camera=config["camera"],
+            collision={
+                "radius_m": robot["radius_m"],
+                "height_m": robot["collision_height_m"],
+                "volume": robot["collision_volume"],
+                "eta_col": robot["eta_col"],
+            },
+            counts=counts,
+            tables={
+                name: TableInfo(path=rel, rows=rows_by_path[rel], columns=list(schema.names))
+                for name, (rel, _, schema) in tables.items()
+            },
+            fingerprint=fingerprint,
+        )
+        write_json_atomic(tmp / INFO_PATH, info.model_dump(mode="json"))
+        n_bytes = sum(p.stat().st_size for p in tmp.rglob("*") if p.is_file())
+        os.replace(tmp, target)  # atomic on one file system; fails if target appeared meanwhile
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return ExportResult(target, version, fingerprint, episodes.num_rows, n_bytes)

@@ -1,0 +1,101 @@
+"""``meta/info.json`` of a release, as a validated pydantic model (DESIGN §7)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from song.datasets.bench.schema import FORMAT_NAME, SCHEMA_VERSION, schema_major
+from song.errors import BenchmarkError, SchemaVersionError
+
+SEMVER = re.compile(r"^(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)$")
+
+
+class Generator(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    package: str = "song"
+    version: str
+    git_commit: str = ""
+    config_sha256: str
+
+
+class TableInfo(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    path: str
+    rows: int
+    columns: list[str]
+
+
+class Info(BaseModel):
+    """Everything a reader needs to know about one release before opening a table."""
+
+    model_config = ConfigDict(extra="forbid")
+    format: str = FORMAT_NAME
+    dataset_version: str
+    schema_version: str = SCHEMA_VERSION
+    parent: str | None = None
+    notes: str = ""
+    created: str = Field(..., description="ISO-8601 UTC; SOURCE_DATE_EPOCH when set, for reproducible builds")
+    generator: Generator
+    frame: dict[str, str] = {"units": "m", "up": "z"}
+    fps: int = 30
+    robot: dict[str, Any]
+    camera: dict[str, Any]
+    collision: dict[str, Any]
+    counts: dict[str, Any]
+    tables: dict[str, TableInfo]
+    fingerprint: str = Field(..., description="sha256 of the sorted manifest (every file but info.json)")
+
+    @field_validator("dataset_version", "schema_version")
+    @classmethod
+    def _semver(cls, value: str) -> str:
+        if not SEMVER.match(value):
+            raise ValueError("expected a semantic version X.Y.Z")
+        return value
+
+    @field_validator("format")
+    @classmethod
+    def _format(cls, value: str) -> str:
+        if value != FORMAT_NAME:
+            raise ValueError(f"expected '{FORMAT_NAME}'")
+        return value
+
+
+def check_schema_version(found: str, where: str | Path) -> None:
+    """Refuse a release whose schema major differs from ours, saying what to do, both ways."""
+    ours, theirs = schema_major(SCHEMA_VERSION), schema_major(found)
+    if theirs > ours:
+        raise SchemaVersionError(
+            f"{where}: schema {found} is newer than this song reads ({SCHEMA_VERSION}); upgrade: pip install -U song"
+        )
+    if theirs < ours:
+        raise SchemaVersionError(
+            f"{where}: schema {found} is older than this song reads ({SCHEMA_VERSION}); re-export it with "
+            f"`song export-bench` from its run, or install the song release that wrote it"
+        )
+
+
+def read_info(path: Path) -> Info:
+    """Read and validate ``meta/info.json``; checks the schema major version."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise BenchmarkError(f"{path}: cannot read release info: {exc}") from exc
+    if isinstance(data, dict) and isinstance(data.get("schema_version"), str) and SEMVER.match(data["schema_version"]):
+        check_schema_version(data["schema_version"], path)
+    try:
+        return Info.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        field = ".".join(str(p) for p in first["loc"])
+        raise BenchmarkError(f"{path}: {field}: {first['msg']}") from exc
+
+
+def version_key(version: str) -> tuple[int, int, int]:
+    """Sort key of a semver string."""
+    major, minor, patch = (int(part) for part in version.split("."))
+    return (major, minor, patch)

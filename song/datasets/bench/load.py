@@ -1,0 +1,152 @@
+"""Load API for the runtime: ``song.datasets.bench.open(path, version=None)`` (DESIGN §7).
+
+Reads only the release's own files; never imports ``song.pipeline``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from song.datasets.bench.info import Info, check_schema_version, read_info
+from song.datasets.bench.release import resolve_version
+from song.datasets.bench.schema import (
+    AVATARS_PATH,
+    EPISODES_PATH,
+    INFO_PATH,
+    META_SCHEMA_VERSION,
+    PEDESTRIANS_PATH,
+    SCENES_PATH,
+)
+from song.datasets.bench.types import AvatarBinding, Episode, PedestrianTrack, StaticMap
+from song.errors import BenchmarkError
+
+
+class Benchmark:
+    """An opened release. Tables are read once; per-scene data is decoded on first use and cached."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.info: Info = read_info(root / INFO_PATH)
+        self.episodes_table = self._read(EPISODES_PATH.format(part=0))
+        self.scenes_table = self._read(SCENES_PATH)
+        self.pedestrians_table = self._read(PEDESTRIANS_PATH.format(part=0))
+        self.avatars_table = self._read(AVATARS_PATH.format(part=0))
+        self._scenes = {row["scene_id"]: row for row in self.scenes_table.to_pylist()}
+        self.static_map = lru_cache(maxsize=64)(self._static_map)
+        self.pedestrians = lru_cache(maxsize=64)(self._pedestrians)
+
+    @property
+    def version(self) -> str:
+        return self.info.dataset_version
+
+    def _read(self, rel: str):
+        path = self.root / rel
+        try:
+            table = pq.read_table(path)
+        except (OSError, ValueError) as exc:
+            raise BenchmarkError(f"{path}: cannot read table: {exc}") from exc
+        found = (table.schema.metadata or {}).get(META_SCHEMA_VERSION)
+        if found is None:
+            raise BenchmarkError(f"{path}: no schema version in the Parquet metadata; not a song release file")
+        check_schema_version(found.decode(), path)
+        return table
+
+    def blob(self, ref: dict | None) -> Path | None:
+        """Absolute path of a blob reference ``{path, sha256, bytes}`` (None stays None)."""
+        return None if not ref else self.root / ref["path"]
+
+    def _static_map(self, scene_id: str) -> StaticMap:
+        import cv2
+
+        row = self._scenes.get(scene_id)
+        if row is None:
+            raise BenchmarkError(f"{self.root}: scene '{scene_id}' is not in this release")
+        data = np.fromfile(self.blob(row["occupancy"]), dtype=np.uint8)
+        cells = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        return StaticMap(cells=cells, resolution=float(row["resolution"]), origin=tuple(row["origin"]))
+
+    def _pedestrians(self, scene_id: str) -> tuple[PedestrianTrack, ...]:
+        table = self.pedestrians_table.filter(pc.equal(self.pedestrians_table.column("scene_id"), scene_id))
+        ped = table.column("ped_id").to_numpy()
+        t = table.column("t").to_numpy()
+        xy = np.column_stack([table.column("x").to_numpy(), table.column("y").to_numpy()])
+        yaw = table.column("yaw").to_numpy()
+        tracks = []
+        for ped_id in np.unique(ped):
+            mask = ped == ped_id
+            tracks.append(PedestrianTrack(int(ped_id), t[mask], xy[mask], yaw[mask]))
+        return tuple(tracks)
+
+    def _avatars(self, scene_id: str) -> list[AvatarBinding]:
+        table = self.avatars_table.filter(pc.equal(self.avatars_table.column("scene_id"), scene_id))
+        return [
+            AvatarBinding(row["ped_id"], row["avatar_id"], self.blob(row["asset"]), self.blob(row["cache"]))
+            for row in table.to_pylist()
+        ]
+
+    def __len__(self) -> int:
+        return self.episodes_table.num_rows
+
+    def episode_ids(self) -> list[str]:
+        return self.episodes_table.column("episode_id").to_pylist()
+
+    def episodes(self, difficulty: str | None = None, scene: str | None = None) -> Iterator[Episode]:
+        """Typed episodes in episode-id order, optionally filtered by difficulty and scene."""
+        table = self.episodes_table
+        if difficulty is not None:
+            table = table.filter(pc.equal(table.column("difficulty"), difficulty))
+        if scene is not None:
+            table = table.filter(pc.equal(table.column("scene_id"), scene))
+        for row in table.to_pylist():
+            yield self._episode(row)
+
+    def episode(self, episode_id: str) -> Episode:
+        """One episode by id."""
+        table = self.episodes_table.filter(pc.equal(self.episodes_table.column("episode_id"), episode_id))
+        if table.num_rows != 1:
+            raise BenchmarkError(f"{self.root}: episode '{episode_id}' not found")
+        return self._episode(table.to_pylist()[0])
+
+    def _episode(self, row: dict) -> Episode:
+        scene_id = row["scene_id"]
+        factors = {k: row[k] for k in ("path_length", "n_turns", "n_encounters", "corridor_width", "score")}
+        factors.update({k: row[k] for k in ("bin_length", "bin_turns", "bin_encounters", "bin_width")})
+        return Episode(
+            episode_id=row["episode_id"],
+            scene_id=scene_id,
+            difficulty=row["difficulty"],
+            mode=row["mode"],
+            seed=int(row["seed"]),
+            start_xy=np.asarray(row["start_position"][:2], dtype=np.float64),
+            start_yaw=float(row["start_yaw"]),
+            goal_xy=np.asarray(row["goal_position"][:2], dtype=np.float64),
+            goal_radius=float(row["goal_radius"]),
+            geodesic_distance=float(row["geodesic_distance"]),
+            optimal_time=float(row["optimal_time"]),
+            t0=float(row["t0"]),
+            path=np.asarray(row["path"], dtype=np.float64).reshape(-1, 2),
+            static_map=self.static_map(scene_id),
+            pedestrians=list(self.pedestrians(scene_id)),
+            avatars=self._avatars(scene_id),
+            factors=factors,
+        )
+
+
+def open_benchmark(path: str | Path, version: str | None = None) -> Benchmark:
+    """Open a release: ``path`` is a release folder, or a benchmark folder plus ``version`` (latest when None).
+
+    ``path`` may also be written ``DIR@X.Y.Z``.
+    """
+    text = str(path)
+    if "@" in text and version is None:
+        text, version = text.rsplit("@", 1)
+    path = Path(text)
+    if (path / INFO_PATH).is_file() and version is None:
+        return Benchmark(path)
+    return Benchmark(resolve_version(path, version))

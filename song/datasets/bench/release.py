@@ -1,0 +1,120 @@
+"""Release housekeeping: list versions, verify every hash, diff two versions (``song bench``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pyarrow.parquet as pq
+
+from song.datasets.bench.info import SEMVER, Info, read_info, version_key
+from song.datasets.bench.schema import EPISODES_PATH, INFO_PATH, MANIFEST_PATH
+from song.errors import BenchmarkError
+from song.util import sha256_file, sha256_json
+
+
+def list_versions(bench_dir: str | Path) -> list[str]:
+    """Published versions under ``bench_dir`` (folders named X.Y.Z with an info.json), oldest first."""
+    bench_dir = Path(bench_dir)
+    if not bench_dir.is_dir():
+        raise BenchmarkError(f"{bench_dir}: benchmark folder is missing")
+    found = [p.name for p in bench_dir.iterdir() if p.is_dir() and SEMVER.match(p.name) and (p / INFO_PATH).is_file()]
+    return sorted(found, key=version_key)
+
+
+def resolve_version(bench_dir: str | Path, version: str | None) -> Path:
+    """The release folder of ``version`` (the latest when None)."""
+    versions = list_versions(bench_dir)
+    if not versions:
+        raise BenchmarkError(f"{bench_dir}: no released versions; run `song export-bench` first")
+    if version is None:
+        version = versions[-1]
+    if version not in versions:
+        raise BenchmarkError(f"{bench_dir}: version {version} not found; available: {', '.join(versions)}")
+    return Path(bench_dir) / version
+
+
+@dataclass
+class VerifyReport:
+    """Outcome of :func:`verify_release`; ``ok`` when nothing is missing, extra or altered."""
+
+    version: str
+    fingerprint_ok: bool
+    missing: list[str] = field(default_factory=list)
+    extra: list[str] = field(default_factory=list)
+    altered: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.fingerprint_ok and not (self.missing or self.extra or self.altered)
+
+
+def verify_release(release: str | Path) -> VerifyReport:
+    """Recompute every file's sha256 against the manifest and the manifest against the fingerprint."""
+    from song.datasets.bench.export import fingerprint_of
+
+    release = Path(release)
+    info = read_info(release / INFO_PATH)
+    try:
+        manifest = pq.read_table(release / MANIFEST_PATH).to_pylist()
+    except (OSError, ValueError) as exc:
+        return VerifyReport(info.dataset_version, False, altered=[MANIFEST_PATH + f" ({exc})"])
+    report = VerifyReport(info.dataset_version, fingerprint_of(manifest) == info.fingerprint)
+    listed = {row["path"]: row for row in manifest}
+    for rel, row in listed.items():
+        path = release / rel
+        if not path.is_file():
+            report.missing.append(rel)
+        elif path.stat().st_size != row["bytes"] or sha256_file(path) != row["sha256"]:
+            report.altered.append(rel)
+    for path in sorted(release.rglob("*")):
+        rel = path.relative_to(release).as_posix()
+        if path.is_file() and rel not in listed and rel not in (INFO_PATH, MANIFEST_PATH):
+            report.extra.append(rel)
+    return report
+
+
+def summarize(release: Path) -> dict[str, Any]:
+    """One line of ``song bench list``."""
+    info = read_info(release / INFO_PATH)
+    return {
+        "version": info.dataset_version,
+        "schema": info.schema_version,
+        "parent": info.parent or "",
+        "fingerprint": info.fingerprint[:16],
+        "episodes": info.counts.get("episodes", 0),
+        "scenes": info.counts.get("scenes", 0),
+        "created": info.created,
+    }
+
+
+def _episode_digests(release: Path) -> dict[str, str]:
+    table = pq.read_table(release / EPISODES_PATH.format(part=0))
+    return {row["episode_id"]: sha256_json(row) for row in table.to_pylist()}
+
+
+def _schemas(info: Info) -> dict[str, list[str]]:
+    return {name: table.columns for name, table in info.tables.items()}
+
+
+def diff_releases(old: Path, new: Path) -> dict[str, Any]:
+    """Added, removed and changed episodes (by id, then by content) and schema changes."""
+    old_info, new_info = read_info(old / INFO_PATH), read_info(new / INFO_PATH)
+    a, b = _episode_digests(old), _episode_digests(new)
+    schema_changes = {}
+    old_s, new_s = _schemas(old_info), _schemas(new_info)
+    for name in sorted(set(old_s) | set(new_s)):
+        before, after = set(old_s.get(name, [])), set(new_s.get(name, []))
+        if before != after:
+            schema_changes[name] = {"added": sorted(after - before), "removed": sorted(before - after)}
+    return {
+        "old": old_info.dataset_version,
+        "new": new_info.dataset_version,
+        "schema_version": [old_info.schema_version, new_info.schema_version],
+        "added": sorted(set(b) - set(a)),
+        "removed": sorted(set(a) - set(b)),
+        "changed": sorted(k for k in set(a) & set(b) if a[k] != b[k]),
+        "unchanged": sum(1 for k in set(a) & set(b) if a[k] == b[k]),
+        "schema_changes": schema_changes,
+    }

@@ -1,0 +1,183 @@
+"""Releases: round trip, immutability, verify, diff, plain-Parquet readability, Habitat projection."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import song.datasets.bench as bench
+from song.datasets.bench.export import export_bench
+from song.datasets.bench.habitat import from_habitat_point, to_habitat_point, to_habitat_rotation
+from song.datasets.bench.release import diff_releases, list_versions, verify_release
+from song.datasets.bench.schema import EPISODES_PATH, META_DATASET_VERSION, META_SCHEMA_VERSION
+from song.errors import BenchmarkError, SchemaVersionError
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(autouse=True)
+def _fixed_clock(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+
+
+def test_round_trip_matches_run(graded_run, tmp_path: Path) -> None:
+    run = graded_run()
+    result = export_bench(run, tmp_path / "bench", "1.0.0", notes="first")
+    opened = bench.open(tmp_path / "bench")
+    assert opened.version == "1.0.0" and len(opened) == 10 == result.n_episodes
+    source = {row["episode_id"]: row for row in pq.read_table(run / "manifest/episodes.parquet").to_pylist()}
+    assert opened.episode_ids() == sorted(source)
+    for episode in opened.episodes():
+        row = source[episode.episode_id]
+        np.testing.assert_allclose(episode.start_xy, [row["start_x"], row["start_y"]])
+        np.testing.assert_allclose(episode.goal_xy, [row["goal_x"], row["goal_y"]])
+        np.testing.assert_allclose(episode.path, row["path"])
+        assert (episode.difficulty, episode.mode, episode.seed) == (row["difficulty"], row["mode"], row["seed"])
+        assert episode.geodesic_distance == row["geodesic_distance"] and episode.t0 == row["t0"]
+        assert episode.factors["n_encounters"] == row["n_encounters"] and episode.goal_radius == 1.0
+        crowd = pq.read_table(run / "scenes" / episode.scene_id / "crowd.parquet").to_pandas()
+        assert [t.ped_id for t in episode.pedestrians] == sorted(crowd.ped_id.unique())
+        for track in episode.pedestrians:
+            mine = crowd[crowd.ped_id == track.ped_id]
+            np.testing.assert_array_equal(track.t, mine.t.to_numpy())
+            np.testing.assert_array_equal(track.xy[:, 0], mine.x.to_numpy())
+        assert episode.static_map.cells.shape == (80, 160) and episode.static_map.resolution == 0.05
+    hard = list(opened.episodes(difficulty="hard"))
+    assert hard and all(e.difficulty == "hard" for e in hard)
+    assert {e.scene_id for e in opened.episodes(scene="scene_1")} == {"scene_1"}
+
+
+def test_identical_inputs_identical_bytes_and_refuse_existing(graded_run, tmp_path: Path) -> None:
+    run = graded_run()
+    a = export_bench(run, tmp_path / "x", "1.0.0")
+    b = export_bench(run, tmp_path / "y", "1.0.0")
+    assert a.fingerprint == b.fingerprint and _files(a.path) == _files(b.path)
+    before = _files(a.path)
+    with pytest.raises(BenchmarkError, match="already exists"):
+        export_bench(run, tmp_path / "x", "1.0.0")
+    assert _files(a.path) == before and list_versions(tmp_path / "x") == ["1.0.0"]
+    # a new version of the same run: only the version stamps differ
+    c = export_bench(run, tmp_path / "x", "1.1.0", parent="1.0.0")
+    assert c.fingerprint != a.fingerprint
+    old = pq.read_table(a.path / EPISODES_PATH.format(part=0))
+    new = pq.read_table(c.path / EPISODES_PATH.format(part=0))
+    assert old.replace_schema_metadata(None).equals(new.replace_schema_metadata(None))
+    assert new.schema.metadata[META_DATASET_VERSION] == b"1.1.0"
+    assert {p for p in _files(a.path) if p.startswith("blobs/")} == {
+        p for p in _files(c.path) if p.startswith("blobs/")
+    }
+    assert diff_releases(a.path, c.path)["unchanged"] == 10
+
+
+def test_interrupted_export_leaves_nothing(graded_run, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    run = graded_run()
+    import song.datasets.bench.export as export_module
+
+    def boom(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(export_module, "fingerprint_of", boom)
+    with pytest.raises(KeyboardInterrupt):
+        export_bench(run, tmp_path / "bench", "1.0.0")
+    assert list((tmp_path / "bench").iterdir()) == []
+
+
+@pytest.mark.parametrize("damage", ["parquet_byte", "blob_byte", "delete", "add"])
+def test_verify_catches_damage(graded_run, tmp_path: Path, damage: str) -> None:
+    release = export_bench(graded_run(), tmp_path / "bench", "1.0.0").path
+    assert verify_release(release).ok
+    episodes = release / EPISODES_PATH.format(part=0)
+    blob = sorted((release / "blobs").rglob("*.png"))[0]
+    if damage == "parquet_byte" or damage == "blob_byte":
+        target = episodes if damage == "parquet_byte" else blob
+        data = bytearray(target.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        target.write_bytes(bytes(data))
+        expected = ("altered", target)
+    elif damage == "delete":
+        blob.unlink()
+        expected = ("missing", blob)
+    else:
+        extra = release / "data" / "notes.txt"
+        extra.write_text("hello")
+        expected = ("extra", extra)
+    report = verify_release(release)
+    assert not report.ok
+    assert getattr(report, expected[0]) == [expected[1].relative_to(release).as_posix()]
+
+
+def test_diff_reports_added_removed_changed(graded_run, tmp_path: Path) -> None:
+    a = export_bench(graded_run("a", n_scenes=2), tmp_path / "bench", "1.0.0").path
+    b = export_bench(graded_run("b", n_scenes=3, shift=0.5), tmp_path / "bench", "2.0.0").path
+    diff = diff_releases(a, b)
+    assert diff["added"] == [f"scene_2-{e:03d}" for e in range(5)]
+    assert diff["removed"] == [] and len(diff["changed"]) == 10
+
+
+def test_plain_parquet_and_duckdb_query(graded_run, tmp_path: Path) -> None:
+    release = export_bench(graded_run(), tmp_path / "bench", "1.0.0").path
+    import pandas as pd
+
+    episodes = release / EPISODES_PATH.format(part=0)
+    frame = pd.read_parquet(episodes)
+    assert set(frame.columns) >= {"episode_id", "scene_id", "difficulty", "start_rotation", "goals"}
+    assert (frame.difficulty == "hard").sum() == 2
+    duckdb = pytest.importorskip("duckdb")
+    count = duckdb.sql(f"SELECT count(*) FROM '{episodes}' WHERE difficulty = 'hard'").fetchall()[0][0]
+    assert count == 2
+
+
+def test_schema_major_checked_both_ways(graded_run, tmp_path: Path) -> None:
+    release = export_bench(graded_run(), tmp_path / "bench", "1.0.0").path
+    info_path = release / "meta/info.json"
+    info = json.loads(info_path.read_text())
+    for found, hint in (("2.0.0", "upgrade"), ("0.9.0", "re-export")):
+        info["schema_version"] = found
+        info_path.write_text(json.dumps(info))
+        with pytest.raises(SchemaVersionError, match=hint):
+            bench.open(release)
+    # and inside a Parquet file
+    info["schema_version"] = "1.0.0"
+    info_path.write_text(json.dumps(info))
+    episodes = release / EPISODES_PATH.format(part=0)
+    table = pq.read_table(episodes)
+    meta = dict(table.schema.metadata)
+    meta[META_SCHEMA_VERSION] = b"9.0.0"
+    pq.write_table(table.replace_schema_metadata(meta), episodes)
+    with pytest.raises(SchemaVersionError, match=str(episodes)):
+        bench.open(release)
+
+
+def test_open_errors_are_actionable(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(BenchmarkError, match="export-bench"):
+        bench.open(tmp_path / "empty")
+    with pytest.raises(BenchmarkError, match="missing"):
+        bench.open(tmp_path / "nowhere")
+
+
+def test_habitat_projection(graded_run, tmp_path: Path) -> None:
+    release = export_bench(graded_run(), tmp_path / "bench", "1.0.0").path
+    from song.datasets.bench.habitat import export_habitat
+
+    out = export_habitat(bench.open(release), tmp_path / "hab.json.gz")
+    episodes = json.loads(gzip.decompress(out.read_bytes()))["episodes"]
+    assert len(episodes) == 10
+    first = bench.open(release).episode(episodes[0]["episode_id"])
+    np.testing.assert_allclose(from_habitat_point(np.array(episodes[0]["start_position"]))[:2], first.start_xy)
+    pts = np.random.default_rng(0).normal(size=(20, 3))
+    np.testing.assert_allclose(from_habitat_point(to_habitat_point(pts)), pts)
+    # heading θ = 0 (our +x) must map to Habitat's +x direction: rotate −Z by the quaternion
+    x, y, z, w = to_habitat_rotation(0.0)
+    angle = 2 * np.arctan2(y, w)
+    forward = np.array([-np.sin(angle), 0.0, -np.cos(angle)])
+    np.testing.assert_allclose(forward, [1.0, 0.0, 0.0], atol=1e-12)
+    shutil.rmtree(release)
