@@ -148,7 +148,7 @@ def _avatar_rows(run_dir: Path, scene_id: str, ped_ids: list[int], blobs: BlobSt
                 "ped_id": ped_id,
                 "avatar_id": binding.get("avatar_id", ""),
                 "activity": intents.get(ped_id, {}).get("activity", ""),
-                "height_m": float(binding.get("height_m", meta.get("height_m", float("nan")))),
+                "height_m": binding.get("height_m", meta.get("height_m")),
                 "cache": blobs.add(scene_dir / binding["cache_file"]) if "cache_file" in binding else None,
                 "asset": blobs.add(Path(asset)) if asset else None,
                 "amass": blobs.add(amass_dir / "motion_amass.npz"),
