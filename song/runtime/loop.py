@@ -1,0 +1,175 @@
+"""The closed-loop episode runner (DESIGN §8; paper "Evaluation protocol").
+
+Per 10 Hz step: observe → act → clip to the robot's limits → integrate. Static contact restores the
+last safe pose and counts C_obs (at δ_obs = 5 the episode fails); a robot that has not moved for 10
+steps is also turned toward the most open direction of its 70° field of view. Any avatar collision
+(more than η_col Gaussian centres inside the robot volume) fails the episode. Success when the goal is
+closer than 1 m. Otherwise a time-out after T_max steps. Exactly one outcome per episode.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from song.config import RobotConfig
+from song.datasets.bench.types import Episode, pedestrian_states
+from song.runtime.avatars import AvatarCollider
+from song.runtime.metrics import EpisodeMetrics, episode_metrics
+from song.runtime.observation import Observation, ScanConfig, observe
+from song.runtime.policies import Policy
+from song.runtime.robot import Pose, clamp_command, integrate
+from song.runtime.world import StaticWorld
+
+MOVED_EPS_M = 0.02  # "has not moved": less than this displacement over the last stuck_steps steps
+
+
+@dataclass
+class EpisodeResult:
+    """Outcome and log of one episode."""
+
+    episode_id: str
+    scene_id: str
+    difficulty: str
+    outcome: str
+    steps: int
+    obstacle_collisions: int
+    max_gaussian_count: int
+    trajectory: np.ndarray  # (K, 3) x, y, yaw
+    nearest: np.ndarray  # (K,) nearest-avatar horizontal distance per pose, m
+    metrics: EpisodeMetrics
+    events: list[tuple[int, str]] = field(default_factory=list)
+
+
+def _most_open_yaw(pose: Pose, world: StaticWorld, fov: float, max_range: float = 5.0) -> float:
+    angles = pose.yaw + np.linspace(-fov / 2, fov / 2, 15)
+    ranges = world.cast(pose.xy, angles, max_range)
+    return float(angles[int(np.argmax(ranges))])
+
+
+class EpisodeRunner:
+    """Steps one episode; used by :func:`run_episode` and the Gymnasium env."""
+
+    def __init__(
+        self,
+        episode: Episode,
+        collider: AvatarCollider,
+        config: RobotConfig | None = None,
+        scan: ScanConfig | None = None,
+        privileged: bool = False,
+    ) -> None:
+        self.episode = episode
+        self.cfg = config or RobotConfig()
+        self.scan = scan or ScanConfig()
+        self.world = StaticWorld(episode.static_map)
+        self.collider = collider
+        self.privileged = privileged
+        self.dt = 1.0 / self.cfg.control_hz
+        self.max_yaw_rate = np.deg2rad(self.cfg.max_yaw_rate_deg_s)
+        self.pose = Pose(float(episode.start_xy[0]), float(episode.start_xy[1]), float(episode.start_yaw))
+        self.last_safe = self.pose
+        self.command = np.zeros(2)
+        self.step_index = 0
+        self.c_obs = 0
+        self.max_count = 0
+        self.outcome: str | None = None
+        self.poses = [self.pose]
+        self.nearest = [self._nearest(self.time)]
+        self.events: list[tuple[int, str]] = []
+
+    @property
+    def time(self) -> float:
+        return self.episode.t0 + self.step_index * self.dt
+
+    def _nearest(self, t: float) -> float:
+        _, xy, _ = pedestrian_states(self.episode.pedestrians, t)
+        return float(np.linalg.norm(xy - self.pose.xy, axis=1).min()) if len(xy) else float("inf")
+
+    def observation(self) -> Observation:
+        _, xy, vel = pedestrian_states(self.episode.pedestrians, self.time)
+        return observe(
+            self.time, self.pose, self.command, self.episode.goal_xy, self.world, xy, vel, self.scan, self.privileged
+        )
+
+    def step(self, v: float, omega: float) -> str | None:
+        """Apply one command; returns the outcome when the episode ends, else None."""
+        if self.outcome is not None:
+            raise RuntimeError("episode already ended")
+        v, omega = clamp_command(v, omega, self.cfg.max_speed_mps, self.max_yaw_rate)
+        self.command = np.array([v, omega])
+        pose = integrate(self.pose, v, omega, self.dt)
+        self.step_index += 1
+        if self.world.collides(pose.xy, self.cfg.radius_m)[()]:
+            self.c_obs += 1
+            self.events.append((self.step_index, "obstacle"))
+            pose = self.last_safe
+            window = self.poses[-self.cfg.stuck_steps :]
+            if len(window) >= self.cfg.stuck_steps and np.linalg.norm(window[0].xy - pose.xy) < MOVED_EPS_M:
+                pose = Pose(pose.x, pose.y, _most_open_yaw(pose, self.world, np.deg2rad(self.cfg.fov_deg)))
+                self.events.append((self.step_index, "reorient"))
+        else:
+            self.last_safe = pose
+        self.pose = pose
+        self.poses.append(pose)
+        self.nearest.append(self._nearest(self.time))
+        count = self.collider.count(self.time, pose.xy)
+        self.max_count = max(self.max_count, count)
+        if self.c_obs >= self.cfg.max_obstacle_collisions:
+            self.outcome = "obstacle"
+        elif count > self.cfg.eta_col:
+            self.outcome = "human"
+            self.events.append((self.step_index, "human"))
+        elif np.linalg.norm(pose.xy - self.episode.goal_xy) < self.cfg.goal_radius_m:
+            self.outcome = "success"
+        elif self.step_index >= self.cfg.max_steps:
+            self.outcome = "timeout"
+        return self.outcome
+
+    def result(self) -> EpisodeResult:
+        if self.outcome is None:
+            raise RuntimeError("episode has not ended")
+        traj = np.array([[p.x, p.y, p.yaw] for p in self.poses])
+        nearest = np.array(self.nearest)
+        metrics = episode_metrics(
+            self.outcome,
+            traj[:, :2],
+            self.dt,
+            self.episode.geodesic_distance,
+            self.episode.optimal_time,
+            nearest,
+            self.cfg.psc_threshold_m,
+        )
+        return EpisodeResult(
+            self.episode.episode_id,
+            self.episode.scene_id,
+            self.episode.difficulty,
+            self.outcome,
+            self.step_index,
+            self.c_obs,
+            self.max_count,
+            traj,
+            nearest,
+            metrics,
+            self.events,
+        )
+
+
+def run_episode(
+    episode: Episode,
+    policy: Policy,
+    collider: AvatarCollider,
+    config: RobotConfig | None = None,
+    scan: ScanConfig | None = None,
+    on_step: Callable[[EpisodeRunner], None] | None = None,
+) -> EpisodeResult:
+    """Run ``policy`` on ``episode`` until it ends; deterministic for a deterministic policy."""
+    runner = EpisodeRunner(episode, collider, config, scan, privileged=bool(getattr(policy, "privileged", False)))
+    policy.reset(episode)
+    while runner.outcome is None:
+        v, omega = policy.act(runner.observation())
+        runner.step(v, omega)
+        if on_step is not None:
+            on_step(runner)
+    return runner.result()

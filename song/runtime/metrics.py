@@ -1,0 +1,145 @@
+"""Social-navigation metrics as pure functions over arrays (DESIGN §8; paper "Evaluation metrics").
+
+Choices (also in docs/metrics.md):
+- Every episode has exactly one outcome: success, obstacle (C_obs ≥ δ_obs), human (any avatar
+  collision) or timeout, so SR + CR_obs + CR_hum + TO = 100 %.
+- SPL = S·L*/max(L, L*), STL = S·T*/max(T, T*), with L the robot's travelled length and T its time.
+- Distances to people are horizontal, robot centre to avatar root. PSC is the fraction of an
+  episode's steps whose nearest-avatar distance is ≥ 0.5 m (steps with nobody present count as
+  compliant); MinD is the episode's minimum (inf when nobody is ever present; such episodes are left
+  out of the MinD mean).
+- JK: κ_t = |ẋÿ − ẏẍ| / |v|³ with |v| fixed to 0.5 m/s (the paper), derivatives by central
+  differences at the control period; JK = RMS of Δκ/Δt over the episode (0 for fewer than 4 poses).
+All rates are percentages in the summary (0–100); per-episode values are fractions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+OUTCOMES = ("success", "obstacle", "human", "timeout")
+NOMINAL_SPEED = 0.5
+
+
+def spl(success: np.ndarray, length: np.ndarray, optimal_length: np.ndarray) -> np.ndarray:
+    """Per-episode S · L* / max(L, L*)."""
+    success, length, optimal = (np.asarray(a, dtype=np.float64) for a in (success, length, optimal_length))
+    return success * optimal / np.maximum(np.maximum(length, optimal), 1e-12)
+
+
+def stl(success: np.ndarray, time: np.ndarray, optimal_time: np.ndarray) -> np.ndarray:
+    """Per-episode S · T* / max(T, T*)."""
+    return spl(success, time, optimal_time)
+
+
+def path_length(xy: np.ndarray) -> float:
+    """Travelled length of a (K, 2) trajectory, m."""
+    xy = np.asarray(xy, dtype=np.float64)
+    return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()) if len(xy) > 1 else 0.0
+
+
+def personal_space_compliance(nearest: np.ndarray, threshold: float = 0.5) -> float:
+    """Fraction of steps with nearest-avatar distance ≥ ``threshold`` (inf = nobody present)."""
+    nearest = np.asarray(nearest, dtype=np.float64)
+    return float(np.mean(nearest >= threshold)) if nearest.size else 1.0
+
+
+def jerk(xy: np.ndarray, dt: float, speed: float = NOMINAL_SPEED) -> float:
+    """RMS of Δκ/Δt along a (K, 2) trajectory sampled every ``dt`` seconds.
+
+    κ = |ẋÿ − ẏẍ| / |v|³ with |v| = ``speed`` (paper: 0.5 m/s). Central differences: ÿ from three
+    consecutive poses, ẏ the mean of the two adjacent first differences (exact on circles).
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    if len(xy) < 4:
+        return 0.0
+    first = np.diff(xy, axis=0) / dt
+    vel = 0.5 * (first[:-1] + first[1:])
+    acc = np.diff(first, axis=0) / dt
+    kappa = np.abs(vel[:, 0] * acc[:, 1] - vel[:, 1] * acc[:, 0]) / speed**3
+    rate = np.diff(kappa) / dt
+    return float(np.sqrt(np.mean(rate**2)))
+
+
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    """Per-episode values that the aggregate metrics are built from."""
+
+    outcome: str
+    length: float
+    time: float
+    optimal_length: float
+    optimal_time: float
+    psc: float
+    min_distance: float
+    jerk: float
+
+
+def episode_metrics(
+    outcome: str,
+    xy: np.ndarray,
+    dt: float,
+    optimal_length: float,
+    optimal_time: float,
+    nearest: np.ndarray,
+    psc_threshold: float = 0.5,
+) -> EpisodeMetrics:
+    """Per-episode metrics from the logged robot poses (K, 2) and nearest-avatar distances (K,)."""
+    if outcome not in OUTCOMES:
+        raise ValueError(f"unknown outcome {outcome!r}; expected one of {OUTCOMES}")
+    nearest = np.asarray(nearest, dtype=np.float64)
+    return EpisodeMetrics(
+        outcome=outcome,
+        length=path_length(xy),
+        time=(len(xy) - 1) * dt,
+        optimal_length=optimal_length,
+        optimal_time=optimal_time,
+        psc=personal_space_compliance(nearest, psc_threshold),
+        min_distance=float(nearest.min()) if nearest.size else float("inf"),
+        jerk=jerk(xy, dt),
+    )
+
+
+def aggregate(episodes: Sequence[EpisodeMetrics]) -> dict[str, float]:
+    """The paper's metric row over a set of episodes (rates in %, AvgT in s, MinD in m)."""
+    n = len(episodes)
+    if n == 0:
+        return {
+            key: float("nan")
+            for key in ("n", "SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "MinD", "JK")
+        }
+    outcome = np.array([e.outcome for e in episodes])
+    success = (outcome == "success").astype(np.float64)
+    times = np.array([e.time for e in episodes])
+    min_d = np.array([e.min_distance for e in episodes])
+    finite = np.isfinite(min_d)
+    return {
+        "n": float(n),
+        "SR": 100.0 * success.mean(),
+        "SPL": 100.0 * spl(success, [e.length for e in episodes], [e.optimal_length for e in episodes]).mean(),
+        "STL": 100.0 * stl(success, times, [e.optimal_time for e in episodes]).mean(),
+        "TO": 100.0 * np.mean(outcome == "timeout"),
+        "AvgT": float(times[success > 0].mean()) if success.any() else float("nan"),
+        "CR_obs": 100.0 * np.mean(outcome == "obstacle"),
+        "CR_hum": 100.0 * np.mean(outcome == "human"),
+        "PSC": 100.0 * float(np.mean([e.psc for e in episodes])),
+        "MinD": float(min_d[finite].mean()) if finite.any() else float("nan"),
+        "JK": float(np.mean([e.jerk for e in episodes])),
+    }
+
+
+METRIC_COLUMNS = ("SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "MinD", "JK")
+
+
+def markdown_table(rows: dict[str, dict[str, dict[str, float]]]) -> str:
+    """The paper's Table 2 layout: one row per (policy, difficulty), metric columns."""
+    header = "| policy | difficulty | n | " + " | ".join(METRIC_COLUMNS) + " |"
+    lines = [header, "|" + "---|" * (3 + len(METRIC_COLUMNS))]
+    for policy, by_difficulty in rows.items():
+        for difficulty, values in by_difficulty.items():
+            cells = [f"{values[c]:.2f}" if np.isfinite(values[c]) else "–" for c in METRIC_COLUMNS]
+            lines.append(f"| {policy} | {difficulty} | {int(values['n'])} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,177 @@
+"""The ``Policy`` protocol and the built-in baselines (DESIGN §8; paper Table 2 rows).
+
+- ``straight``: turn toward the goal and drive (blind to walls and people).
+- ``astar``: pure pursuit of the episode's smoothed A* path (blind to people).
+- ``social``: privileged upper bound: the A* path plus a velocity-obstacle rollout planner that
+  sees every pedestrian's position and velocity and the static map (like the paper's teleop row).
+A user's policy loads with ``--policy module:Class`` (a class with ``reset`` and ``act``).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from song.datasets.bench.types import Episode
+from song.errors import SongError
+from song.runtime.observation import BODY_RADIUS_M, Observation
+from song.runtime.robot import wrap_angle
+from song.runtime.world import StaticWorld
+
+MAX_SPEED = 0.5
+MAX_YAW_RATE = np.deg2rad(45.0)
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """A robot policy: ``reset`` once per episode, then ``act`` each 10 Hz step → (v m/s, ω rad/s)."""
+
+    privileged: bool
+
+    def reset(self, episode: Episode) -> None: ...
+
+    def act(self, observation: Observation) -> tuple[float, float]: ...
+
+
+def steer_to(bearing: float, gain: float = 2.0, turn_in_place: float = 0.6) -> tuple[float, float]:
+    """Drive toward a bearing (rad, robot frame): turn on the spot when it is far off."""
+    omega = float(np.clip(gain * bearing, -MAX_YAW_RATE, MAX_YAW_RATE))
+    v = 0.0 if abs(bearing) > turn_in_place else MAX_SPEED * float(np.cos(bearing)) ** 2
+    return v, omega
+
+
+class StraightPolicy:
+    """Turn toward the goal and drive."""
+
+    privileged = False
+
+    def reset(self, episode: Episode) -> None:
+        pass
+
+    def act(self, observation: Observation) -> tuple[float, float]:
+        return steer_to(float(observation.goal_polar[1]))
+
+
+class PathFollower:
+    """Pure pursuit along a polyline with a monotone progress index."""
+
+    def __init__(self, path: np.ndarray, lookahead: float = 0.7) -> None:
+        self.path = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        seg = np.linalg.norm(np.diff(self.path, axis=0), axis=1)
+        self.arc = np.concatenate([[0.0], np.cumsum(seg)])
+        self.lookahead = lookahead
+        self.progress = 0.0
+
+    def point_at(self, s: float) -> np.ndarray:
+        s = float(np.clip(s, 0.0, self.arc[-1]))
+        return np.array([np.interp(s, self.arc, self.path[:, 0]), np.interp(s, self.arc, self.path[:, 1])])
+
+    def target(self, xy: np.ndarray) -> np.ndarray:
+        """The lookahead point beyond the robot's projection on the path (progress never goes back)."""
+        if len(self.path) < 2:
+            return self.path[-1]
+        samples = np.linspace(self.progress, min(self.progress + 2.0, self.arc[-1]), 41)
+        points = np.column_stack(
+            [np.interp(samples, self.arc, self.path[:, 0]), np.interp(samples, self.arc, self.path[:, 1])]
+        )
+        self.progress = float(samples[np.argmin(np.linalg.norm(points - xy, axis=1))])
+        return self.point_at(self.progress + self.lookahead)
+
+
+def bearing_to(observation: Observation, point: np.ndarray) -> float:
+    rel = point - observation.pose.xy
+    return float(wrap_angle(np.arctan2(rel[1], rel[0]) - observation.pose.yaw))
+
+
+class AStarPolicy:
+    """Follow the episode's smoothed A* path (blind to people)."""
+
+    privileged = False
+
+    def reset(self, episode: Episode) -> None:
+        path = episode.path if len(episode.path) >= 2 else np.vstack([episode.start_xy, episode.goal_xy])
+        self.follower = PathFollower(np.vstack([path, episode.goal_xy]))
+
+    def act(self, observation: Observation) -> tuple[float, float]:
+        return steer_to(bearing_to(observation, self.follower.target(observation.pose.xy)))
+
+
+class SocialPolicy:
+    """Privileged rollout planner: A* guidance + avoidance of predicted pedestrians and walls.
+
+    Each step it rolls out a grid of constant (v, ω) commands for ``horizon`` seconds against the
+    pedestrians' constant-velocity predictions and the clearance field, discards commands that come
+    closer than the safety distances, and picks the one that best approaches the pure-pursuit target.
+    """
+
+    privileged = True
+
+    def __init__(self, horizon: float = 2.0, dt: float = 0.1, safety: float = 0.12) -> None:
+        self.horizon, self.dt, self.safety = horizon, dt, safety
+        v = np.linspace(0.0, MAX_SPEED, 6)
+        w = np.linspace(-MAX_YAW_RATE, MAX_YAW_RATE, 11)
+        self.commands = np.array([(a, b) for a in v for b in w])
+
+    def reset(self, episode: Episode) -> None:
+        self.world = StaticWorld(episode.static_map)
+        path = episode.path if len(episode.path) >= 2 else np.vstack([episode.start_xy, episode.goal_xy])
+        self.follower = PathFollower(np.vstack([path, episode.goal_xy]), lookahead=1.0)
+
+    def _rollouts(self, x: float, y: float, yaw: float) -> np.ndarray:
+        steps = int(round(self.horizon / self.dt))
+        v, w = self.commands[:, 0:1], self.commands[:, 1:2]
+        k = np.arange(1, steps + 1)[None, :] * self.dt
+        heading = yaw + w * k
+        safe_w = np.where(np.abs(w) < 1e-9, 1.0, w)
+        xs = np.where(np.abs(w) < 1e-9, x + v * k * np.cos(yaw), x + v / safe_w * (np.sin(heading) - np.sin(yaw)))
+        ys = np.where(np.abs(w) < 1e-9, y + v * k * np.sin(yaw), y - v / safe_w * (np.cos(heading) - np.cos(yaw)))
+        return np.stack([xs, ys], axis=-1)  # (C, K, 2)
+
+    def act(self, observation: Observation) -> tuple[float, float]:
+        pose = observation.pose
+        target = self.follower.target(pose.xy)
+        traj = self._rollouts(pose.x, pose.y, pose.yaw)
+        clearance = self.world.clearance_at(traj).min(axis=1)
+        wall_ok = clearance > 0.2 + 0.03
+        cost = np.linalg.norm(traj[:, -1] - target, axis=1) + 0.3 * np.linalg.norm(traj[:, 3] - target, axis=1)
+        if observation.pedestrians is not None and len(observation.pedestrians):
+            peds = observation.pedestrians
+            k = np.arange(1, traj.shape[1] + 1) * self.dt
+            future = peds[None, :, :2] + k[:, None, None] * peds[None, :, 2:]  # (K, P, 2)
+            gaps = np.linalg.norm(traj[:, :, None, :] - future[None], axis=-1)  # (C, K, P)
+            # near-term predictions matter most; distant ones are discounted
+            weights = np.exp(-k / 1.5)[None, :, None]
+            closest = gaps.min(axis=(1, 2))
+            people_ok = closest > 0.2 + BODY_RADIUS_M + self.safety
+            cost = cost + 2.0 * (weights * np.clip(1.2 - gaps, 0.0, None)).sum(axis=(1, 2))
+        else:
+            closest = np.full(len(traj), np.inf)
+            people_ok = np.ones(len(traj), dtype=bool)
+        ok = wall_ok & people_ok
+        if not ok.any():  # no safe command: keep as far from people and walls as possible
+            score = np.minimum(closest, 10.0) + np.where(wall_ok, 1.0, 0.0)
+            best = int(np.argmax(score))
+        else:
+            best = int(np.argmin(np.where(ok, cost, np.inf)))
+        return float(self.commands[best, 0]), float(self.commands[best, 1])
+
+
+BASELINES = {"straight": StraightPolicy, "astar": AStarPolicy, "social": SocialPolicy}
+
+
+def load_policy(name: str) -> Policy:
+    """A baseline by name, or ``module:Class`` for a user's policy (instantiated without arguments)."""
+    if name in BASELINES:
+        return BASELINES[name]()
+    if ":" not in name:
+        raise SongError(f"unknown policy '{name}': use one of {', '.join(BASELINES)} or module:Class")
+    module_name, _, attr = name.partition(":")
+    try:
+        policy = getattr(importlib.import_module(module_name), attr)()
+    except (ImportError, AttributeError) as exc:
+        raise SongError(f"cannot load policy '{name}': {exc}") from exc
+    if not isinstance(policy, Policy):
+        raise SongError(f"policy '{name}' must define reset(episode), act(observation) and privileged")
+    return policy
