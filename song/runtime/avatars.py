@@ -89,3 +89,25 @@ def proxy_poser(tracks: list[PedestrianTrack]) -> Callable[[int, float], np.ndar
         return out
 
     return pose
+
+
+def make_collider(episode, config) -> AvatarCollider:
+    """The collider for an episode: posed Gaussian avatars when the release has caches, else body proxies.
+
+    Args:
+        episode: a :class:`song.datasets.bench.Episode`.
+        config: a :class:`song.config.RobotConfig` (radius, height, volume).
+    """
+    pose = gaussian_poser(episode) if any(a.cache_path for a in episode.avatars) else None
+    return AvatarCollider(
+        episode.pedestrians,
+        pose or proxy_poser(episode.pedestrians),
+        radius=config.radius_m,
+        height=config.collision_height_m,
+        volume=config.collision_volume,
+    )
+
+
+def gaussian_poser(episode) -> Callable[[int, float], np.ndarray] | None:
+    """Pose the release's avatar Gaussians with LBS (filled in when the binding format is known)."""
+    return None
