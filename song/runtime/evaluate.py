@@ -37,6 +37,7 @@ RESULTS_SCHEMA = pa.schema(
         ("min_distance", pa.float64()),
         ("jerk", pa.float64()),
         ("trajectory", pa.list_(pa.list_(pa.float64(), 3))),
+        ("events", pa.list_(pa.struct([("step", pa.int32()), ("kind", pa.string())]))),
     ]
 )
 
@@ -98,6 +99,7 @@ def results_table(results: list[EpisodeResult], policy: str) -> pa.Table:
                 "min_distance": m.min_distance,
                 "jerk": m.jerk,
                 "trajectory": r.trajectory.tolist(),
+                "events": [{"step": step, "kind": kind} for step, kind in r.events],
             }
         )
     return pa.Table.from_pylist(rows, RESULTS_SCHEMA)

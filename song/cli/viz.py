@@ -1,0 +1,72 @@
+"""``song viz scene|crowd|episode|bench``: pictures and videos."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from song.cli import app
+from song.cli.common import console, handle_errors
+
+viz_app = typer.Typer(help="Top-down pictures and videos.", no_args_is_help=True)
+app.add_typer(viz_app, name="viz")
+
+
+def _report(paths: list[Path]) -> None:
+    for path in paths:
+        console.print(f"wrote {path}")
+
+
+@viz_app.command("scene")
+@handle_errors
+def scene(
+    scene: Path = typer.Argument(..., help="scene package folder"),
+    out: Path = typer.Option(None, "--out", help="PNG path (default: <scene>.png here)"),
+) -> None:
+    """Occupancy, regions, objects and the navigable area of a scene package."""
+    from song.viz.scene import render_scene
+
+    _report([render_scene(scene, out or Path(f"{scene.name}.png"))])
+
+
+@viz_app.command("crowd")
+@handle_errors
+def crowd(
+    run: Path = typer.Argument(..., help="run folder"),
+    scene: str = typer.Option(..., "--scene", help="scene id"),
+    out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
+    video: bool = typer.Option(True, "--video/--no-video", help="also write an MP4"),
+) -> None:
+    """All pedestrian trajectories over the map (PNG) and an animation (MP4)."""
+    from song.viz.crowd import render_crowd
+
+    _report(render_crowd(run, scene, out, video))
+
+
+@viz_app.command("episode")
+@handle_errors
+def episode(
+    bench: str = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
+    episode_id: str = typer.Option(..., "--episode", help="episode id"),
+    results: Path | None = typer.Option(None, "--results", help="per-episode results Parquet from song eval"),
+    out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
+    video: bool = typer.Option(True, "--video/--no-video", help="also write an MP4"),
+) -> None:
+    """Map, pedestrians, the A* path and (with --results) the robot's path and events."""
+    from song.viz.episode import render_episode
+
+    _report(render_episode(bench, episode_id, out, results, video))
+
+
+@viz_app.command("bench")
+@handle_errors
+def bench(
+    bench: str = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
+    out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
+    results: list[Path] = typer.Option(None, "--results", help="summary JSON(s) from song eval"),
+) -> None:
+    """Fig. 3 left (encounters vs L*), factor histograms, mode × difficulty, results bars."""
+    from song.viz.bench import render_bench
+
+    _report(render_bench(bench, out, results))

@@ -1,0 +1,1 @@
+"""Top-down pictures and videos of scenes, crowds, episodes and benchmark statistics."""
