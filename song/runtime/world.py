@@ -6,7 +6,6 @@ import numpy as np
 from scipy import ndimage
 
 from song.datasets.bench.types import StaticMap
-from song.geometry.grid import world_to_cell
 
 
 class StaticWorld:
@@ -25,11 +24,15 @@ class StaticWorld:
 
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:
         """Distance to the nearest obstacle, m, for (..., 2) points (0 off the grid)."""
-        rc = world_to_cell(xy, self.rows, self.map.resolution, self.map.origin)
-        inside = (rc[..., 0] >= 0) & (rc[..., 0] < self.rows) & (rc[..., 1] >= 0)
-        inside &= rc[..., 1] < self.clearance.shape[1]
-        out = np.zeros(rc.shape[:-1])
-        out[inside] = self.clearance[rc[..., 0][inside], rc[..., 1][inside]]
+        xy = np.asarray(xy, dtype=np.float64)
+        res = self.map.resolution
+        col = np.floor((xy[..., 0] - self.map.origin[0]) / res).astype(np.intp)
+        row = self.rows - 1 - np.floor((xy[..., 1] - self.map.origin[1]) / res).astype(np.intp)
+        inside = (row >= 0) & (row < self.rows) & (col >= 0) & (col < self.clearance.shape[1])
+        if inside.all():
+            return self.clearance[row, col]
+        out = np.zeros(row.shape)
+        out[inside] = self.clearance[row[inside], col[inside]]
         return out
 
     def collides(self, xy: np.ndarray, radius: float) -> np.ndarray:

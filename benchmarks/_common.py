@@ -1,0 +1,44 @@
+"""Helpers shared by the benchmark scripts: timing, peak memory, JSON output."""
+
+from __future__ import annotations
+
+import json
+import resource
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@contextmanager
+def timed(record: dict, key: str):
+    """Store wall seconds of the block in ``record[key]``."""
+    start = time.perf_counter()
+    yield
+    record[key] = round(time.perf_counter() - start, 3)
+
+
+def peak_rss_mb(children: bool = True) -> float:
+    """Peak resident memory of this process (and of its finished children), MB."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss if children else 0
+    return round(max(own, kids) / 1024, 1)
+
+
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and its finished children."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def folder_bytes(path: Path) -> int:
+    return sum(p.stat().st_size for p in Path(path).rglob("*") if p.is_file())
+
+
+def emit(result: dict) -> None:
+    """Print the one JSON object a benchmark script reports."""
+    json.dump(result, sys.stdout, indent=2, sort_keys=True)
+    sys.stdout.write("\n")
