@@ -32,8 +32,11 @@ def draw_scene(package: ScenePackage, agent_radius: float = AGENT_RADIUS_M, labe
         cv2.fillPoly(image, [pts], (205, 170, 125))
         cv2.polylines(image, [pts], True, (120, 80, 40), 1, cv2.LINE_AA)
     if labels:
+        from shapely.geometry import Polygon
+
         for index, region in enumerate(smap.regions):
-            centre = canvas.px(np.asarray(region.polygon).mean(axis=0))
+            anchor = Polygon(region.polygon).representative_point()
+            centre = canvas.px(np.array([anchor.x, anchor.y]))
             label(image, region.name or region.type, (int(centre[0]) - 30, int(centre[1])), colour(index), 0.5)
         for obj in smap.objects:
             centre = canvas.px(np.asarray(obj.footprint).mean(axis=0))
