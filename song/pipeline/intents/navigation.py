@@ -1,0 +1,82 @@
+"""Where pedestrians can stand and walk in a scene: legal centres, the main component, snap points."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from shapely.geometry import Polygon
+
+from song.datasets.scenes import ScenePackage
+from song.geometry.gridpath import GridGraph, clearance, distances_from, grid_graph
+
+SNAP_GAP_M = 0.15  # how far from an object's footprint a pedestrian stands (beyond its body radius)
+COARSE_M = 0.1  # geodesic estimates for intents run on a grid of this cell size
+
+
+@dataclass
+class Walkable:
+    """Legal pedestrian centres of a scene (free space eroded by the body radius), main component only."""
+
+    legal: np.ndarray  # (rows, cols) bool on the scene grid
+    main: np.ndarray  # (rows, cols) bool: the largest connected part of ``legal``
+    package: ScenePackage
+    radius: float
+    coarse_factor: int
+    coarse: GridGraph
+
+    @property
+    def area_m2(self) -> float:
+        return float(self.main.sum()) * self.package.occupancy.resolution**2
+
+    def on_main(self, xy: np.ndarray) -> np.ndarray:
+        rc = self.package.occupancy.to_cell(xy)
+        rows, cols = self.main.shape
+        ok = (rc[..., 0] >= 0) & (rc[..., 0] < rows) & (rc[..., 1] >= 0) & (rc[..., 1] < cols)
+        out = np.zeros(rc.shape[:-1], dtype=bool)
+        out[ok] = self.main[rc[..., 0][ok], rc[..., 1][ok]]
+        return out
+
+    def geodesic_from(self, start: np.ndarray) -> tuple[np.ndarray, float]:
+        """Coarse geodesic distances (m) from ``start`` to every coarse node; and the metres per cell."""
+        res = self.package.occupancy.resolution * self.coarse_factor
+        rc = tuple(int(v) for v in self.package.occupancy.to_cell(start) // self.coarse_factor)
+        if self.coarse.index[rc] < 0:
+            near = self.coarse.cells[np.argmin(np.abs(self.coarse.cells - np.array(rc)).sum(axis=1))]
+            rc = tuple(int(v) for v in near)
+        return distances_from(self.coarse, rc) * res, res
+
+    def geodesic(self, dist: np.ndarray, goal: np.ndarray) -> float:
+        rc = tuple(int(v) for v in self.package.occupancy.to_cell(goal) // self.coarse_factor)
+        rows, cols = self.coarse.index.shape
+        if not (0 <= rc[0] < rows and 0 <= rc[1] < cols) or self.coarse.index[rc] < 0:
+            return float("inf")
+        return float(dist[self.coarse.index[rc]])
+
+
+def walkable(package: ScenePackage, radius: float) -> Walkable:
+    """Legal centres at ``radius`` and their largest 8-connected component; a coarse graph for geodesics."""
+    grid = package.occupancy
+    legal = clearance(grid.free, grid.resolution) >= radius + 0.5 * grid.resolution
+    labels, count = ndimage.label(legal, structure=np.ones((3, 3)))
+    if count == 0:
+        main = legal
+    else:
+        sizes = np.bincount(labels.ravel())[1:]
+        main = labels == (int(np.argmax(sizes)) + 1)
+    factor = max(1, int(round(COARSE_M / grid.resolution)))
+    rows, cols = main.shape
+    pad = (-rows % factor, -cols % factor)
+    coarse = (
+        np.pad(main, ((0, pad[0]), (0, pad[1]))).reshape((rows + pad[0]) // factor, factor, -1, factor).any(axis=(1, 3))
+    )
+    return Walkable(legal, main, package, radius, factor, grid_graph(coarse))
+
+
+def snap_points(walk: Walkable, footprint: list[tuple[float, float]], step: float = 0.1) -> np.ndarray:
+    """Candidate standing points around an object footprint, on the walkable main component."""
+    ring = Polygon(footprint).buffer(walk.radius + SNAP_GAP_M, join_style=2).exterior
+    n = max(8, int(ring.length / step))
+    pts = np.array([ring.interpolate(i / n, normalized=True).coords[0] for i in range(n)])
+    return pts[walk.on_main(pts)]
