@@ -12,7 +12,8 @@ from song.datasets.scenes import ScenePackage
 from song.geometry.gridpath import GridGraph, clearance, distances_from, grid_graph
 
 SNAP_GAP_M = 0.15  # how far from an object's footprint a pedestrian stands (beyond its body radius)
-COARSE_M = 0.1  # geodesic estimates for intents run on a grid of this cell size
+COARSE_M = 0.1
+STANDING_ROOM_M = 0.5  # extra clearance preferred around start/goal spots (a passer-by's body width)  # geodesic estimates for intents run on a grid of this cell size
 
 
 @dataclass
@@ -25,6 +26,7 @@ class Walkable:
     radius: float
     coarse_factor: int
     coarse: GridGraph
+    clearance: np.ndarray  # (rows, cols) distance to the nearest obstacle, m
 
     @property
     def area_m2(self) -> float:
@@ -58,7 +60,8 @@ class Walkable:
 def walkable(package: ScenePackage, radius: float) -> Walkable:
     """Legal centres at ``radius`` and their largest 8-connected component; a coarse graph for geodesics."""
     grid = package.occupancy
-    legal = clearance(grid.free, grid.resolution) >= radius + 0.5 * grid.resolution
+    room = clearance(grid.free, grid.resolution)
+    legal = room >= radius + 0.5 * grid.resolution
     labels, count = ndimage.label(legal, structure=np.ones((3, 3)))
     if count == 0:
         main = legal
@@ -71,12 +74,34 @@ def walkable(package: ScenePackage, radius: float) -> Walkable:
     coarse = (
         np.pad(main, ((0, pad[0]), (0, pad[1]))).reshape((rows + pad[0]) // factor, factor, -1, factor).any(axis=(1, 3))
     )
-    return Walkable(legal, main, package, radius, factor, grid_graph(coarse))
+    return Walkable(legal, main, package, radius, factor, grid_graph(coarse), room)
 
 
-def snap_points(walk: Walkable, footprint: list[tuple[float, float]], step: float = 0.1) -> np.ndarray:
-    """Candidate standing points around an object footprint, on the walkable main component."""
+def snap_points(
+    walk: Walkable,
+    footprint: list[tuple[float, float]],
+    region: list[tuple[float, float]] | None = None,
+    step: float = 0.1,
+) -> np.ndarray:
+    """Candidate standing points around an object footprint, on the walkable main component.
+
+    When the object's region polygon is given, points inside it are preferred, so a pedestrian
+    stands on the object's side of a thin wall rather than in the next room.
+    """
     ring = Polygon(footprint).buffer(walk.radius + SNAP_GAP_M, join_style=2).exterior
     n = max(8, int(ring.length / step))
     pts = np.array([ring.interpolate(i / n, normalized=True).coords[0] for i in range(n)])
-    return pts[walk.on_main(pts)]
+    pts = pts[walk.on_main(pts)]
+    if len(pts):  # prefer spots where a standing person leaves room for others to pass
+        grid = walk.package.occupancy
+        rc = grid.to_cell(pts)
+        room = walk.clearance[rc[:, 0], rc[:, 1]] >= walk.radius + STANDING_ROOM_M
+        if room.any():
+            pts = pts[room]
+    if region is not None and len(pts):
+        from shapely import contains_xy
+
+        inside = contains_xy(Polygon(region), pts[:, 0], pts[:, 1])
+        if inside.any():
+            pts = pts[inside]
+    return pts

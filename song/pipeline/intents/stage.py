@@ -87,6 +87,15 @@ def filter_intents(
         if any(np.linalg.norm(start - np.asarray(k.start_xy)) < cfg.min_spawn_separation_m for k in kept):
             rejected.append(RejectedIntent(**base, reason="spawn_conflict", detail="another start within 0.8 m"))
             continue
+        # people stand at their start before leaving and at their goal after arriving: keep those apart
+        standing = [np.asarray(k.goal_xy) for k in kept] + [np.asarray(k.start_xy) for k in kept]
+        if any(np.linalg.norm(goal - p) < cfg.min_spawn_separation_m for p in standing) or any(
+            np.linalg.norm(start - np.asarray(k.goal_xy)) < cfg.min_spawn_separation_m for k in kept
+        ):
+            rejected.append(
+                RejectedIntent(**base, reason="standing_conflict", detail="start/goal within 0.8 m of another's")
+            )
+            continue
         if len(kept) >= limit:
             rejected.append(RejectedIntent(**base, reason="over_limit"))
             continue
@@ -111,7 +120,8 @@ def filter_intents(
 def generate_intents(package: ScenePackage, config: SongConfig, rng: np.random.Generator) -> IntentSet:
     """Offline proposals → filtered intents for one scene."""
     walk = walkable(package, config.crowd.agent_radius_m)
-    snaps = {obj.id: snap_points(walk, obj.footprint) for obj in package.semantic_map.objects}
+    regions = {region.id: region.polygon for region in package.semantic_map.regions}
+    snaps = {obj.id: snap_points(walk, obj.footprint, regions.get(obj.region)) for obj in package.semantic_map.objects}
     snaps = {k: v for k, v in snaps.items() if len(v)}
     n = pedestrian_count(walk.area_m2, config)
     model = OfflineIntentModel()
