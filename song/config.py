@@ -103,6 +103,10 @@ class GradingConfig(_Section):
     hard_fraction: float = Field(0.2, ge=0.0, le=1.0, description="paper: 100 of 500")
     medium_fraction: float = Field(0.4, ge=0.0, le=1.0, description="paper: 200 of 500")
     robot_radius_m: float = Field(0.2, gt=0.0, description="robot radius for traversability, m")
+    path_margin_m: float = Field(
+        0.1, ge=0.0, description="extra clearance kept by the A* path beyond the robot radius, m"
+    )
+    start_clearance_m: float = Field(1.0, ge=0.0, description="no pedestrian this close to the start at t0, m")
     robot_speed_mps: float = Field(0.5, gt=0.0, description="nominal robot speed for T* and encounters, m/s")
     near_ped_m: float = Field(2.0, gt=0.0, description="co/counter-directional endpoint distance, m")
     encounter_pass_m: float = Field(1.0, gt=0.0, description="encounter mode: closest pass, m")
@@ -111,6 +115,8 @@ class GradingConfig(_Section):
     encounter_radius_m: float = Field(3.0, gt=0.0, description="encounter factor radius, m")
     width_sample_m: float = Field(0.1, gt=0.0, description="corridor-width sampling step, m")
     max_tries: int = Field(200, ge=1, description="rejection-sampling attempts per episode and mode")
+    min_path_m: float = Field(2.0, ge=0.0, description="shortest episode path L*, m")
+    max_path_m: float = Field(7.0, gt=0.0, description="longest L*, m (T* = 14 s leaves slack within T_max = 20 s)")
 
 
 class RobotConfig(_Section):

@@ -92,10 +92,10 @@ class AStarPolicy:
 
     def reset(self, episode: Episode) -> None:
         path = episode.path if len(episode.path) >= 2 else np.vstack([episode.start_xy, episode.goal_xy])
-        self.follower = PathFollower(np.vstack([path, episode.goal_xy]))
+        self.follower = PathFollower(np.vstack([path, episode.goal_xy]), lookahead=0.35)
 
     def act(self, observation: Observation) -> tuple[float, float]:
-        return steer_to(bearing_to(observation, self.follower.target(observation.pose.xy)))
+        return steer_to(bearing_to(observation, self.follower.target(observation.pose.xy)), turn_in_place=0.4)
 
 
 class SocialPolicy:

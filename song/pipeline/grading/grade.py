@@ -1,0 +1,192 @@
+"""Factors, difficulty split and the manifest (DESIGN §6; paper "Episode generation and grading")."""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from song.config import GradingConfig, SongConfig
+from song.datasets.scenes import load_scene_package
+from song.pipeline.chain import read_run
+from song.pipeline.crowd.stage import load_crowd
+from song.pipeline.grading.sample import FPS, MODES, Crowd, EpisodeSampler, RobotMap, closest_pass
+from song.util import derive_rng, write_bytes_atomic, write_json_atomic
+
+MANIFEST_DIR = "manifest"
+EPISODES_FILE = "episodes.parquet"
+SUMMARY_FILE = "summary.json"
+FACTORS = ("path_length", "n_turns", "n_encounters", "corridor_width")
+BINS = ("bin_length", "bin_turns", "bin_encounters", "bin_width")
+
+
+def count_turns(path: np.ndarray, threshold_deg: float) -> int:
+    """Vertices of the smoothed path where the heading changes by more than ``threshold_deg``.
+
+    A smoothed (string-pulled) path has one vertex per turn, so each vertex's heading change is one
+    turn; changes at or below the threshold do not count.
+    """
+    d = np.diff(path, axis=0)
+    d = d[np.linalg.norm(d, axis=1) > 1e-9]
+    if len(d) < 2:
+        return 0
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    change = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    return int(np.count_nonzero(np.degrees(change) > threshold_deg))
+
+
+def corridor_width(path: np.ndarray, robot: RobotMap, step: float) -> float:
+    """Mean distance to obstacles along the path, sampled every ``step`` metres (EDT)."""
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.arange(0.0, arc[-1] + 1e-9, step)
+    pts = np.column_stack([np.interp(s, arc, path[:, 0]), np.interp(s, arc, path[:, 1])])
+    rc = robot.package.occupancy.to_cell(pts)
+    return float(robot.clearance[rc[:, 0], rc[:, 1]].mean())
+
+
+def tercile_bins(values: np.ndarray, reverse: bool = False) -> np.ndarray:
+    """Three equal-frequency bins (0, 1, 2) by the 1/3 and 2/3 quantiles; equal values share a bin.
+
+    With ``reverse`` (corridor width: narrower is harder) the bins are flipped.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if len(values) == 0:
+        return np.zeros(0, dtype=np.int8)
+    q1, q2 = np.quantile(values, [1 / 3, 2 / 3])
+    bins = np.where(values <= q1, 0, np.where(values <= q2, 1, 2)).astype(np.int8)
+    return (2 - bins).astype(np.int8) if reverse else bins
+
+
+def split_difficulty(score: np.ndarray, encounters: np.ndarray, length: np.ndarray, ids: list[str], cfg: GradingConfig):
+    """Sort by score, then encounters, then length (all descending), then id; first 20 % hard, next 40 % medium."""
+    n = len(ids)
+    order = sorted(range(n), key=lambda i: (-score[i], -encounters[i], -length[i], ids[i]))
+    n_hard = int(round(cfg.hard_fraction * n))
+    n_medium = int(round(cfg.medium_fraction * n))
+    out = np.empty(n, dtype=object)
+    for rank, i in enumerate(order):
+        out[i] = "hard" if rank < n_hard else "medium" if rank < n_hard + n_medium else "easy"
+    return out
+
+
+@dataclass
+class GradingResult:
+    """What ``song grade`` produced."""
+
+    episodes: pa.Table
+    summary: dict
+
+
+def _scene_episodes(scene_id: str, scenes_dir: Path, run_dir: Path, config: SongConfig, quota: int):
+    cfg = config.grading
+    package = load_scene_package(scenes_dir / scene_id)
+    tracks = load_crowd(run_dir / "scenes" / scene_id)
+    if len(tracks.ids) == 0:
+        return [], {"*": "no pedestrians in this scene"}
+    robot = RobotMap.build(package, cfg.robot_radius_m + cfg.path_margin_m)
+    crowd = Crowd(tracks.ids, tracks.xy)
+    sampler = EpisodeSampler(robot, crowd, cfg, duration=tracks.xy.shape[1] / FPS)
+    rows, infeasible = [], {}
+    for k in range(quota):
+        rng = derive_rng(config.seed, scene_id, "grading", k)
+        mode = MODES[int(rng.integers(len(MODES)))]
+        draw, reason = sampler.draw(mode, rng)
+        if draw is None:
+            infeasible[mode] = reason
+            mode = "random"
+            draw, reason = sampler.draw(mode, rng)
+            if draw is None:
+                infeasible["random"] = reason
+                continue
+        path = draw["path"]
+        passes = closest_pass(path, crowd, draw["t0"], cfg.robot_speed_mps)
+        first = path[1] - path[0]
+        rows.append(
+            {
+                "episode_id": f"{scene_id}-{k:03d}",
+                "scene_id": scene_id,
+                "mode": mode,
+                "seed": int(rng.integers(2**31)),
+                "t0": draw["t0"],
+                "start_x": float(draw["start"][0]),
+                "start_y": float(draw["start"][1]),
+                "start_yaw": float(np.arctan2(first[1], first[0])),
+                "goal_x": float(draw["goal"][0]),
+                "goal_y": float(draw["goal"][1]),
+                "path": path.round(4).tolist(),
+                "geodesic_distance": round(draw["length"], 4),
+                "optimal_time": round(draw["length"] / cfg.robot_speed_mps, 4),
+                "path_length": round(draw["length"], 4),
+                "n_turns": count_turns(path, cfg.turn_threshold_deg),
+                "n_encounters": int(np.count_nonzero(passes <= cfg.encounter_radius_m)),
+                "corridor_width": round(corridor_width(path, robot, cfg.width_sample_m), 4),
+                "min_pass_m": round(float(passes.min()), 4),
+                "pedestrian_ids": tracks.ids.astype(int).tolist(),
+            }
+        )
+    return rows, infeasible
+
+
+def _quotas(scene_ids: list[str], total: int) -> dict[str, int]:
+    base, extra = divmod(total, max(1, len(scene_ids)))
+    return {sid: base + (1 if i < extra else 0) for i, sid in enumerate(scene_ids)}
+
+
+def grade_run(run_dir: str | Path, config: SongConfig | None = None, n_episodes: int | None = None) -> GradingResult:
+    """Sample, measure and grade episodes over every scene of a run; write the manifest."""
+    run_dir = Path(run_dir)
+    scenes_dir, run_config = read_run(run_dir)
+    config = config or run_config
+    cfg = config.grading
+    total = n_episodes or cfg.n_episodes
+    scene_ids = sorted(p.name for p in (run_dir / "scenes").iterdir() if (p / "crowd.parquet").is_file())
+    rows, infeasible = [], {}
+    quotas = _quotas(scene_ids, total)
+    for scene_id in scene_ids:
+        got, why = _scene_episodes(scene_id, scenes_dir, run_dir, config, quotas[scene_id])
+        rows += got
+        if why:
+            infeasible[scene_id] = why
+    rows.sort(key=lambda r: r["episode_id"])
+    ids = [r["episode_id"] for r in rows]
+    values = {f: np.array([r[f] for r in rows], dtype=np.float64) for f in FACTORS}
+    for factor, name in zip(FACTORS, BINS, strict=True):
+        bins = tercile_bins(values[factor], reverse=factor == "corridor_width")
+        for row, b in zip(rows, bins, strict=True):
+            row[name] = int(b)
+    score = np.array([sum(r[b] for b in BINS) for r in rows])
+    difficulty = split_difficulty(score, values["n_encounters"], values["path_length"], ids, cfg)
+    for row, s, d in zip(rows, score, difficulty, strict=True):
+        row["score"], row["difficulty"] = int(s), str(d)
+    table = pa.Table.from_pylist(rows) if rows else pa.table({"episode_id": pa.array([], pa.string())})
+    summary = _summary(rows, infeasible, total)
+    out = run_dir / MANIFEST_DIR
+    buffer = io.BytesIO()
+    pq.write_table(table, buffer, compression="zstd", compression_level=9)
+    write_bytes_atomic(out / EPISODES_FILE, buffer.getvalue())
+    write_json_atomic(out / SUMMARY_FILE, summary)
+    return GradingResult(table, summary)
+
+
+def _summary(rows: list[dict], infeasible: dict, requested: int) -> dict:
+    counts: dict[str, dict[str, int]] = {}
+    factors: dict[str, dict[str, dict[str, float]]] = {}
+    for difficulty in ("easy", "medium", "hard"):
+        subset = [r for r in rows if r["difficulty"] == difficulty]
+        counts[difficulty] = {mode: sum(r["mode"] == mode for r in subset) for mode in MODES}
+        factors[difficulty] = {
+            f: {"median": float(np.median([r[f] for r in subset])) if subset else float("nan")} for f in FACTORS
+        }
+    return {
+        "requested": requested,
+        "episodes": len(rows),
+        "counts": counts,
+        "factors": json.loads(json.dumps(factors).replace("NaN", "null")),
+        "infeasible": infeasible,
+    }

@@ -1,0 +1,159 @@
+"""Robot episode sampling in one scene: four modes, A* on the robot-inflated grid (DESIGN §6)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from song.config import GradingConfig
+from song.datasets.scenes import ScenePackage
+from song.geometry.gridpath import (
+    GridGraph,
+    clearance,
+    distances_from,
+    grid_graph,
+    path_cells,
+    polyline_length,
+    shortcut,
+)
+
+MODES = ("co_directional", "counter_directional", "encounter", "random")
+FPS = 30
+
+
+@dataclass
+class RobotMap:
+    """Where the robot can be: free space inflated by its radius, and the shortest-path graph on it."""
+
+    package: ScenePackage
+    legal: np.ndarray
+    clearance: np.ndarray
+    xy: np.ndarray  # (n, 2) world centres of the graph's cells
+
+    graph: GridGraph | None = None
+
+    @classmethod
+    def build(cls, package: ScenePackage, radius: float) -> RobotMap:
+        """Inflate by ``radius`` (the robot's radius plus the path's safety margin)."""
+        grid = package.occupancy
+        room = clearance(grid.free, grid.resolution)
+        legal = room >= radius + 0.5 * grid.resolution
+        graph = grid_graph(legal)
+        return cls(package, legal, room, grid.to_world(graph.cells), graph)
+
+    def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+        """Smoothed A*-optimal path (K, 2) between two legal points, or None when unreachable."""
+        grid = self.package.occupancy
+        a, b = (tuple(int(v) for v in grid.to_cell(p)) for p in (start, goal))
+        if self.graph.index[a] < 0 or self.graph.index[b] < 0:
+            return None
+        dist, pred = distances_from(self.graph, a, with_path=True)
+        cells = path_cells(self.graph, dist, pred, b)
+        if cells is None:
+            return None
+        points = grid.to_world(shortcut(self.legal, cells))
+        points[0], points[-1] = start, goal
+        return points
+
+
+@dataclass
+class Crowd:
+    """A scene's pedestrian trajectories: ids (P,), xy (P, F, 2) at 30 FPS from t = 0."""
+
+    ids: np.ndarray
+    xy: np.ndarray
+
+    def at(self, t: np.ndarray) -> np.ndarray:
+        """(K, P, 2) positions at times t (K,), holding the first/last frame outside the scenario."""
+        frames = np.clip(np.round(np.asarray(t) * FPS).astype(np.int64), 0, self.xy.shape[1] - 1)
+        return np.transpose(self.xy[:, frames], (1, 0, 2))
+
+    def circle(self) -> tuple[np.ndarray, float]:
+        pts = self.xy.reshape(-1, 2)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        centre = 0.5 * (lo + hi)
+        return centre, float(np.linalg.norm(pts - centre, axis=1).max())
+
+
+def robot_positions(path: np.ndarray, speed: float, dt: float) -> np.ndarray:
+    """Positions (K, 2) of a robot moving along ``path`` at constant ``speed``, sampled every ``dt``."""
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.arange(0.0, arc[-1] + 1e-9, speed * dt)
+    if s[-1] < arc[-1]:
+        s = np.append(s, arc[-1])
+    return np.column_stack([np.interp(s, arc, path[:, 0]), np.interp(s, arc, path[:, 1])])
+
+
+def closest_pass(path: np.ndarray, crowd: Crowd, t0: float, speed: float) -> np.ndarray:
+    """Per pedestrian, the closest horizontal distance to the robot moving along ``path`` from ``t0``."""
+    robot = robot_positions(path, speed, 1.0 / FPS)
+    peds = crowd.at(t0 + np.arange(len(robot)) / FPS)
+    return np.linalg.norm(peds - robot[:, None, :], axis=-1).min(axis=0)
+
+
+def subtended_deg(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> float:
+    u, v = a - centre, b - centre
+    cos = float(u @ v / max(np.linalg.norm(u) * np.linalg.norm(v), 1e-12))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+class EpisodeSampler:
+    """Bounded rejection sampling of (start, goal, t0) for one mode."""
+
+    def __init__(self, robot: RobotMap, crowd: Crowd, cfg: GradingConfig, duration: float) -> None:
+        self.robot, self.crowd, self.cfg = robot, crowd, cfg
+        self.duration = duration
+        self.centre, self.radius = crowd.circle()
+        self.in_circle = robot.xy[np.linalg.norm(robot.xy - self.centre, axis=1) <= self.radius]
+
+    def _near(self, point: np.ndarray, radius: float, rng: np.random.Generator) -> np.ndarray | None:
+        near = self.robot.xy[np.linalg.norm(self.robot.xy - point, axis=1) <= radius]
+        return near[int(rng.integers(len(near)))] if len(near) else None
+
+    def _t0(self, rng: np.random.Generator, length: float) -> float:
+        latest = max(0.0, self.duration - length / self.cfg.robot_speed_mps)
+        return round(float(rng.uniform(0.0, latest)), 3)
+
+    def draw(self, mode: str, rng: np.random.Generator) -> tuple[dict | None, str]:
+        """One episode of ``mode`` or (None, reason) after ``max_tries`` attempts."""
+        cfg = self.cfg
+        reason = "no candidate"
+        for _ in range(cfg.max_tries):
+            if mode in ("co_directional", "counter_directional"):
+                p = int(rng.integers(len(self.crowd.ids)))
+                a, b = self.crowd.xy[p, 0], self.crowd.xy[p, -1]
+                if mode == "counter_directional":
+                    a, b = b, a
+                start, goal = self._near(a, cfg.near_ped_m, rng), self._near(b, cfg.near_ped_m, rng)
+            else:
+                if len(self.in_circle) < 2:
+                    return None, "bounding circle holds no robot-traversable cells"
+                start, goal = (self.in_circle[int(rng.integers(len(self.in_circle)))] for _ in range(2))
+                if subtended_deg(start, goal, self.centre) <= cfg.min_angle_deg:
+                    reason = "angle ≤ 90°"
+                    continue
+            if start is None or goal is None:
+                reason = "no traversable cell near the pedestrian's endpoints"
+                continue
+            path = self.robot.plan(start, goal)
+            if path is None:
+                reason = "goal unreachable from start"
+                continue
+            length = polyline_length(path)
+            if not cfg.min_path_m <= length <= cfg.max_path_m:
+                reason = f"path length {length:.1f} m outside [{cfg.min_path_m}, {cfg.max_path_m}]"
+                continue
+            t0 = self._t0(rng, length)
+            if np.linalg.norm(self.crowd.at(np.array([t0]))[0] - start, axis=1).min() < cfg.start_clearance_m:
+                reason = "a pedestrian stands at the start at t0"
+                continue
+            if (
+                mode == "encounter"
+                and closest_pass(path, self.crowd, t0, cfg.robot_speed_mps).min() > cfg.encounter_pass_m
+            ):
+                reason = "robot never passes within 1 m of a pedestrian"
+                continue
+            return {"start": start, "goal": goal, "path": path, "length": length, "t0": t0}, ""
+        return None, reason
