@@ -22,9 +22,23 @@ $(STAMP): pyproject.toml
 
 setup: $(STAMP)
 
+EVAL ?= runs/demo-eval
+FIGURES ?= runs/demo-figures
+EPISODES ?= 120
+
 demo: setup
 	$(SONG) scenes check $(SCENES)
 	$(SONG) synth --scenes $(SCENES) --out $(RUN) --workers 2
+	$(SONG) grade --run $(RUN) --episodes $(EPISODES)
+	rm -rf $(BENCH)
+	SOURCE_DATE_EPOCH=1700000000 $(SONG) export-bench --run $(RUN) --bench $(BENCH) --version 1.0.0 --notes "make demo"
+	$(SONG) bench verify $(BENCH)
+	$(SONG) eval --bench $(BENCH) --policy straight --policy astar --policy social --out $(EVAL) --workers 2
+	$(SONG) viz bench $(BENCH) --out $(FIGURES) --results $(EVAL)/straight.json --results $(EVAL)/astar.json --results $(EVAL)/social.json
+	$(SONG) viz scene $(SCENES)/procthor_house_6 --out $(FIGURES)/scene.png
+	$(SONG) viz crowd $(RUN) --scene procthor_house_6 --out $(FIGURES)
+	$(SONG) viz episode $(BENCH) --episode procthor_house_6-001 --results $(EVAL)/social.parquet --out $(FIGURES)
+	@echo "results: $(EVAL)/results.md  figures: $(FIGURES)/"
 
 test: setup
 	$(VENV)/bin/ruff check song tests benchmarks

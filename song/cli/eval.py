@@ -41,4 +41,4 @@ def eval_command(
         table[name] = write_results(out, name, results, release)["metrics"]
     text = markdown_table(table)
     (out / "results.md").write_text(text, encoding="utf-8")
-    console.print(text)
+    typer.echo(text)
