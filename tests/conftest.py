@@ -70,3 +70,18 @@ def make_scene(tmp_path: Path) -> Callable[..., Path]:
         return build_two_room_scene(root or tmp_path / "scenes", scene_id, resolution)
 
     return factory
+
+
+SAMPLES = Path(__file__).resolve().parents[1] / "datasets" / "sample_scenes"
+
+
+@pytest.fixture(scope="session")
+def sample_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """intents + crowd on the three shipped ProcTHOR houses (one synth run shared by the session)."""
+    from song.config import SongConfig
+    from song.pipeline.chain import iter_run
+
+    run = tmp_path_factory.mktemp("sample") / "run"
+    results = list(iter_run(SAMPLES, run, SongConfig(seed=1), ["intents", "crowd"], executor="serial"))
+    assert all(r.status == "ok" for r in results), [r.error for r in results]
+    return run

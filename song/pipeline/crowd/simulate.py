@@ -175,8 +175,7 @@ def _simulate(intents: list[Intent], corridors: _Corridors, cfg: CrowdConfig, rn
         vel = (target - pos) / dt
         pos = target
         d_goal = np.linalg.norm(goal - pos, axis=1)
-        done = moving & (d_goal < ARRIVE_M)
-        pos[done] = goal[done]
+        done = moving & (d_goal < ARRIVE_M)  # stands where it is (no snap: a snap would exceed its speed)
         arrived |= done
         arrival[done] = t
         remaining = np.array([_remaining(paths[k], corner[k], pos[k]) for k in range(n)])

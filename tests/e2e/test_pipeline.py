@@ -1,0 +1,55 @@
+"""End to end: synth → grade → export → eval, through the CLI, on the shipped sample houses."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from song.cli import app
+from song.config import RobotConfig
+from song.datasets.bench import open_benchmark
+from song.runtime.evaluate import iter_eval, summarize
+
+
+def _graded_release(sample_run: Path, tmp: Path, episodes: int) -> Path:
+    run = tmp / "run"
+    shutil.copytree(sample_run, run)
+    runner = CliRunner()
+    result = runner.invoke(app, ["grade", "--run", str(run), "--episodes", str(episodes)])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(
+        app, ["export-bench", "--run", str(run), "--bench", str(tmp / "bench"), "--version", "1.0.0"]
+    )
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(app, ["bench", "verify", str(tmp / "bench")])
+    assert result.exit_code == 0 and "ok" in result.output
+    return tmp / "bench"
+
+
+def test_small_pipeline_through_the_cli(sample_run: Path, tmp_path: Path) -> None:
+    bench = _graded_release(sample_run, tmp_path, 24)
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(app, ["eval", "--bench", str(bench), "--policy", "social", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "| social | all | 24 |" in (out / "results.md").read_text()
+    figures = CliRunner().invoke(
+        app, ["viz", "bench", str(bench), "--out", str(tmp_path / "fig"), "--results", str(out / "social.json")]
+    )
+    assert figures.exit_code == 0, figures.output
+
+
+@pytest.mark.slow
+def test_grading_means_something(sample_run: Path, tmp_path: Path) -> None:
+    """On ≥ 100 episodes: social ≥ 90 % on easy and above straight; SR(easy) ≥ SR(hard) for every baseline."""
+    release = open_benchmark(_graded_release(sample_run, tmp_path, 120))
+    rows = {
+        name: summarize(list(iter_eval(release, name, RobotConfig(), workers=2)))
+        for name in ("straight", "astar", "social")
+    }
+    assert rows["social"]["easy"]["SR"] >= 90.0
+    assert rows["social"]["easy"]["SR"] > rows["straight"]["easy"]["SR"]
+    for name, row in rows.items():
+        assert row["easy"]["SR"] >= row["hard"]["SR"], name

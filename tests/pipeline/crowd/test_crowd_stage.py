@@ -1,0 +1,59 @@
+"""Crowd invariants on every sample scene: spacing, legality, speed, arrivals, determinism."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.config import SongConfig
+from song.datasets.scenes import load_scene_package
+from song.pipeline.chain import iter_run
+from song.pipeline.crowd import load_crowd
+from song.pipeline.intents import load_intents
+from song.pipeline.intents.navigation import walkable
+from tests.conftest import SAMPLES
+
+SCENES = ["procthor_house_1", "procthor_house_19", "procthor_house_6"]
+R = SongConfig().crowd.agent_radius_m
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_crowd_invariants(sample_run: Path, scene: str) -> None:
+    scene_dir = sample_run / "scenes" / scene
+    crowd = load_crowd(scene_dir)
+    assert crowd.xy.shape[0] >= 2
+    d = np.linalg.norm(crowd.xy[:, None] - crowd.xy[None], axis=-1)
+    d[np.arange(len(d)), np.arange(len(d))] = np.inf
+    assert d.min() >= 2 * R - 0.01
+    walk = walkable(load_scene_package(SAMPLES / scene), R)
+    assert walk.on_main(crowd.xy.reshape(-1, 2)).all()
+    intents = {i.id: i for i in load_intents(scene_dir).intents}
+    steps = np.linalg.norm(np.diff(crowd.xy, axis=1), axis=-1) * 30
+    max_speed = np.array([intents[int(i)].speed for i in crowd.ids])
+    assert (steps <= max_speed[:, None] * 1.01 + 1e-9).all()
+    for k, ped in enumerate(crowd.ids):  # standing at the start before departure
+        before = crowd.t < intents[int(ped)].depart_time - 1e-9
+        assert np.allclose(crowd.xy[k, before], crowd.xy[k, 0])
+
+
+def test_most_intents_arrive(sample_run: Path) -> None:
+    statuses = [
+        v for s in SCENES for v in json.loads((sample_run / "scenes" / s / "crowd_status.json").read_text()).values()
+    ]
+    arrived = sum(v["status"] == "arrived" for v in statuses)
+    assert arrived / len(statuses) >= 0.75, statuses
+    assert all(v["reason"] for v in statuses if v["status"] != "arrived")
+
+
+def test_same_seed_identical_parquet(sample_run: Path, tmp_path: Path) -> None:
+    again = tmp_path / "again"
+    list(
+        iter_run(
+            SAMPLES, again, SongConfig(seed=1), ["intents", "crowd"], executor="serial", scene_ids=["procthor_house_6"]
+        )
+    )
+    name = "scenes/procthor_house_6/crowd.parquet"
+    assert (again / name).read_bytes() == (sample_run / name).read_bytes()

@@ -1,0 +1,106 @@
+"""Grading: mode constraints, exact split, terciles and tie-breaks, monotone factors, determinism."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from song.config import GradingConfig, SongConfig
+from song.datasets.scenes import load_scene_package
+from song.pipeline.crowd import load_crowd
+from song.pipeline.grading import count_turns, grade_run, split_difficulty, tercile_bins
+from song.pipeline.grading.sample import Crowd, RobotMap, closest_pass, subtended_deg
+from tests.conftest import SAMPLES
+
+
+@pytest.fixture(scope="module")
+def graded(sample_run: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict]]:
+    run = tmp_path_factory.mktemp("graded") / "run"
+    shutil.copytree(sample_run, run)
+    grade_run(run, n_episodes=50)
+    return run, pq.read_table(run / "manifest/episodes.parquet").to_pylist()
+
+
+def test_tercile_bins_and_tie_break() -> None:
+    np.testing.assert_array_equal(tercile_bins(np.arange(9.0)), [0, 0, 0, 1, 1, 1, 2, 2, 2])
+    np.testing.assert_array_equal(tercile_bins(np.arange(9.0), reverse=True), [2, 2, 2, 1, 1, 1, 0, 0, 0])
+    assert len(set(tercile_bins(np.array([1.0, 1, 1, 1, 5, 6])).tolist()[:4])) == 1  # ties share a bin
+    cfg = GradingConfig()
+    score = np.array([8, 5, 5, 5, 0, 3, 3, 1, 2, 4])
+    enc = np.array([0, 2, 3, 3, 0, 1, 1, 0, 0, 0])
+    length = np.array([1.0, 2, 2, 5, 1, 1, 2, 1, 1, 1])
+    ids = [f"e{i}" for i in range(10)]
+    out = split_difficulty(score, enc, length, ids, cfg)
+    assert [ids[i] for i in range(10) if out[i] == "hard"] == [
+        "e0",
+        "e3",
+    ]  # score 8, then 5 with more encounters + length
+    assert list(out).count("medium") == 4 and list(out).count("easy") == 4
+    assert count_turns(np.array([[0, 0], [1, 0], [1, 1], [1.2, 2.0]]), 40.0) == 1
+
+
+def test_split_and_mode_constraints(graded, sample_run: Path) -> None:
+    run, rows = graded
+    assert len(rows) == 50
+    counts = {d: sum(r["difficulty"] == d for r in rows) for d in ("hard", "medium", "easy")}
+    assert counts == {"hard": 10, "medium": 20, "easy": 20}
+    cfg = SongConfig().grading
+    for scene in {r["scene_id"] for r in rows}:
+        tracks = load_crowd(sample_run / "scenes" / scene)
+        crowd = Crowd(tracks.ids, tracks.xy)
+        centre, radius = crowd.circle()
+        robot = RobotMap.build(load_scene_package(SAMPLES / scene), cfg.robot_radius_m + cfg.path_margin_m)
+        for r in (r for r in rows if r["scene_id"] == scene):
+            start, goal, path = (
+                np.array([r["start_x"], r["start_y"]]),
+                np.array([r["goal_x"], r["goal_y"]]),
+                np.array(r["path"]),
+            )
+            assert cfg.min_path_m <= r["geodesic_distance"] <= cfg.max_path_m
+            rc = robot.package.occupancy.to_cell(path)
+            assert robot.legal[rc[:, 0], rc[:, 1]].all()
+            ends = tracks.xy[:, [0, -1]]
+            if r["mode"] == "co_directional":
+                assert any(
+                    np.linalg.norm(e[0] - start) <= 2.0 + 1e-6 and np.linalg.norm(e[1] - goal) <= 2.0 + 1e-6
+                    for e in ends
+                )
+            elif r["mode"] == "counter_directional":
+                assert any(
+                    np.linalg.norm(e[1] - start) <= 2.0 + 1e-6 and np.linalg.norm(e[0] - goal) <= 2.0 + 1e-6
+                    for e in ends
+                )
+            else:
+                assert (
+                    np.linalg.norm(start - centre) <= radius + 1e-6 and np.linalg.norm(goal - centre) <= radius + 1e-6
+                )
+                assert subtended_deg(start, goal, centre) > 90.0
+                if r["mode"] == "encounter":
+                    assert closest_pass(path, crowd, r["t0"], 0.5).min() <= 1.0
+
+
+def test_factor_medians_are_monotone(graded) -> None:
+    _, rows = graded
+
+    def median(f, d):
+        return np.median([r[f] for r in rows if r["difficulty"] == d])
+
+    for factor in ("path_length", "n_encounters"):
+        assert median(factor, "easy") <= median(factor, "medium") <= median(factor, "hard")
+    assert np.mean([r["n_turns"] for r in rows if r["difficulty"] == "easy"]) <= np.mean(
+        [r["n_turns"] for r in rows if r["difficulty"] == "hard"]
+    )
+    assert median("corridor_width", "easy") >= median("corridor_width", "hard")
+
+
+def test_same_seed_identical_manifest(graded, tmp_path: Path) -> None:
+    run, _ = graded
+    again = tmp_path / "run"
+    shutil.copytree(run, again)
+    (again / "manifest/episodes.parquet").unlink()
+    grade_run(again, n_episodes=50)
+    assert (again / "manifest/episodes.parquet").read_bytes() == (run / "manifest/episodes.parquet").read_bytes()
