@@ -63,3 +63,17 @@ def import_scenes(
     console.print(status_table(f"imported into {out}", rows, ["scene", "status", "problem"]))
     if any(r.path is None for r in results):
         raise typer.Exit(1)
+
+
+@scenes_app.command("generate")
+@handle_errors
+def generate(
+    count: int = typer.Option(..., "--count", min=1, help="number of scene packages"),
+    out: Path = typer.Option(..., "--out", help="folder for the packages"),
+    seed: int = typer.Option(0, "--seed", help="generator seed (same seed → identical bytes)"),
+) -> None:
+    """Procedural venues (office, clinic, lobby, shop, restaurant, home, library) with all four files."""
+    from song.datasets.scenes.generate import generate_scenes
+
+    paths = generate_scenes(count, seed, out)
+    console.print(f"wrote {len(paths)} scene packages to {out}")

@@ -145,7 +145,7 @@ class SocialPolicy:
             weights = np.exp(-k / 1.5)[None, :, None]
             closest = gaps.min(axis=(1, 2))
             people_ok = closest > 0.2 + BODY_RADIUS_M + self.safety
-            cost = cost + 2.0 * (weights * np.clip(1.2 - gaps, 0.0, None)).sum(axis=(1, 2))
+            cost = cost + 0.5 * (weights * np.clip(1.0 - gaps, 0.0, None)).sum(axis=(1, 2))
         else:
             closest = np.full(len(traj), np.inf)
             people_ok = np.ones(len(traj), dtype=bool)

@@ -1,0 +1,386 @@
+"""Procedural scene packages (DESIGN §4.4): venues with rooms, a corridor, doorways and named objects.
+
+Layout: a building of venue-dependent size with a corridor along its middle (1.2–2.5 m wide), an
+entrance at its west end, and rooms on both sides, each opening onto the corridor through a doorway
+0.8–1.6 m wide (open venues such as lobbies, shops and restaurants get one large hall instead of the
+rooms on one side). Each room takes a role from the venue's programme (reception, open office,
+consultation room, ...) and is furnished with named functional objects placed away from doorways.
+Every package gets all four files: semantic map, occupancy, a compressed Gaussian PLY of floor,
+walls and furniture, and a USD collision proxy. The same seed gives byte-identical packages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
+from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, write_scene_package
+from song.datasets.scenes.ply import SH_C0, GaussianCloud, write_compressed_ply
+from song.datasets.scenes.raster import Rasterizer
+from song.datasets.scenes.usd import ProxyBox, write_usd_proxy
+from song.geometry.gridpath import clearance
+from song.util import derive_rng
+
+RESOLUTION = 0.05
+OUTER_WALL_M = 0.15
+INNER_WALL_M = 0.1
+WALL_HEIGHT_M = 2.6
+DOOR_CLEAR_M = 0.9  # objects keep this far from a doorway's centre line
+
+# (label, category, width m, depth m, height m)
+Item = tuple[str, str, float, float, float]
+FURNITURE: dict[str, Item] = {
+    "reception_desk": ("reception desk", "reception", 2.0, 0.8, 1.1),
+    "workstation": ("workstation", "workstation", 1.4, 0.7, 0.75),
+    "meeting_table": ("meeting table", "table", 2.4, 1.1, 0.75),
+    "printer": ("printer", "equipment", 0.6, 0.5, 1.0),
+    "coffee_machine": ("coffee machine", "equipment", 0.6, 0.5, 1.2),
+    "sofa": ("sofa", "seating", 2.0, 0.85, 0.8),
+    "waiting_chairs": ("waiting chairs", "seating", 2.4, 0.6, 0.8),
+    "counter": ("counter", "counter", 2.5, 0.7, 1.0),
+    "shelf": ("shelf", "storage", 2.0, 0.5, 1.9),
+    "dining_table": ("dining table", "table", 1.2, 0.8, 0.75),
+    "examination_bed": ("examination bed", "furniture", 1.9, 0.7, 0.7),
+    "consultation_desk": ("consultation desk", "workstation", 1.4, 0.7, 0.75),
+    "bed": ("bed", "furniture", 2.0, 1.6, 0.6),
+    "wardrobe": ("wardrobe", "storage", 1.6, 0.6, 2.0),
+    "fridge": ("fridge", "appliance", 0.7, 0.7, 1.8),
+    "kitchen_counter": ("kitchen counter", "counter", 2.2, 0.6, 0.9),
+    "reading_table": ("reading table", "table", 1.8, 0.9, 0.75),
+    "help_desk": ("help desk", "reception", 1.8, 0.8, 1.0),
+    "luggage_rack": ("luggage rack", "storage", 1.2, 0.5, 1.0),
+    "elevator": ("elevator", "transport", 1.6, 0.3, 2.4),
+    "plant": ("plant", "decor", 0.5, 0.5, 1.2),
+    "checkout": ("checkout", "counter", 1.8, 0.8, 1.0),
+    "display_table": ("display table", "table", 1.4, 0.9, 0.8),
+    "tv_stand": ("tv stand", "storage", 1.6, 0.45, 0.6),
+}
+# venue → (size range ((w_min, w_max), (h_min, h_max)), open hall?, room programme: (room type, name, items))
+VENUES: dict[str, tuple] = {
+    "office": (
+        ((14, 24), (9, 14)),
+        False,
+        [
+            ("reception", "reception", ["reception_desk", "waiting_chairs", "plant"]),
+            ("open_office", "open office", ["workstation", "workstation", "workstation", "workstation", "printer"]),
+            ("meeting_room", "meeting room", ["meeting_table"]),
+            ("kitchenette", "kitchenette", ["coffee_machine", "kitchen_counter", "fridge"]),
+            ("office", "manager office", ["workstation", "shelf"]),
+        ],
+    ),
+    "clinic": (
+        ((14, 22), (9, 13)),
+        False,
+        [
+            ("reception", "reception", ["reception_desk", "plant"]),
+            ("waiting_area", "waiting area", ["waiting_chairs", "waiting_chairs"]),
+            ("consultation_room", "consultation room 1", ["consultation_desk", "examination_bed"]),
+            ("consultation_room", "consultation room 2", ["consultation_desk", "examination_bed"]),
+            ("pharmacy", "pharmacy", ["counter", "shelf"]),
+        ],
+    ),
+    "lobby": (
+        ((16, 26), (10, 15)),
+        True,
+        [
+            ("reception", "hotel reception", ["reception_desk", "luggage_rack", "plant"]),
+            ("lounge", "lounge", ["sofa", "sofa", "plant"]),
+            ("elevators", "elevator hall", ["elevator", "elevator"]),
+            ("cafe", "lobby cafe", ["counter", "dining_table", "dining_table"]),
+        ],
+    ),
+    "shop": (
+        ((14, 22), (10, 14)),
+        True,
+        [
+            ("sales_floor", "sales floor", ["shelf", "shelf", "display_table", "display_table"]),
+            ("checkout", "checkout", ["checkout", "plant"]),
+            ("storeroom", "storeroom", ["shelf", "shelf"]),
+        ],
+    ),
+    "restaurant": (
+        ((14, 22), (10, 14)),
+        True,
+        [
+            ("dining_room", "dining room", ["dining_table", "dining_table", "dining_table", "dining_table"]),
+            ("bar", "bar", ["counter", "coffee_machine"]),
+            ("kitchen", "kitchen", ["kitchen_counter", "fridge", "shelf"]),
+        ],
+    ),
+    "home": (
+        ((10, 16), (8, 12)),
+        False,
+        [
+            ("living_room", "living room", ["sofa", "tv_stand", "plant"]),
+            ("kitchen", "kitchen", ["kitchen_counter", "fridge", "dining_table"]),
+            ("bedroom", "bedroom", ["bed", "wardrobe"]),
+            ("study", "study", ["workstation", "shelf"]),
+        ],
+    ),
+    "library": (
+        ((16, 24), (10, 15)),
+        True,
+        [
+            ("stacks", "book stacks", ["shelf", "shelf", "shelf", "shelf"]),
+            ("reading_room", "reading room", ["reading_table", "reading_table"]),
+            ("help_desk", "help desk", ["help_desk", "printer"]),
+        ],
+    ),
+}
+VENUE_ORDER = ("office", "clinic", "lobby", "shop", "restaurant", "home", "library")
+
+
+@dataclass
+class _Room:
+    kind: str
+    name: str
+    rect: tuple[float, float, float, float]  # x0, y0, x1, y1 (inside walls)
+    door: tuple[float, float, float]  # x centre, y of the wall, width
+    items: list[str] = field(default_factory=list)
+
+
+def _split(rng: np.random.Generator, x0: float, x1: float, n: int, min_w: float) -> list[float]:
+    """n + 1 cut positions between x0 and x1, every piece at least ``min_w`` wide."""
+    free = (x1 - x0) - n * min_w
+    weights = rng.dirichlet(np.ones(n)) * free
+    return list(np.round(x0 + np.concatenate([[0.0], np.cumsum(weights + min_w)]), 2))
+
+
+def _layout(venue: str, rng: np.random.Generator):
+    (wr, hr), open_hall, programme = VENUES[venue]
+    width = float(np.round(rng.uniform(*wr), 1))
+    height = float(np.round(rng.uniform(*hr), 1))
+    corridor = float(np.round(rng.uniform(1.4, 2.4), 2))
+    cy0 = float(np.round(rng.uniform(0.4, 0.6) * (height - corridor), 2))
+    cy1 = cy0 + corridor
+    rooms: list[_Room] = []
+    program = list(programme)
+    south = program[: (len(program) + 1) // 2] if not open_hall else program[:1]
+    north = program[len(south) :]
+    for side, entries in (("south", south), ("north", north)):
+        if not entries:
+            continue
+        cuts = _split(rng, OUTER_WALL_M, width - OUTER_WALL_M, len(entries), 2.8)
+        for k, (kind, name, items) in enumerate(entries):
+            x0, x1 = (
+                cuts[k] + (INNER_WALL_M / 2 if k else 0.0),
+                cuts[k + 1] - (INNER_WALL_M / 2 if k < len(entries) - 1 else 0.0),
+            )
+            if side == "south":
+                rect = (x0, OUTER_WALL_M, x1, cy0 - INNER_WALL_M / 2)
+                wall_y = cy0
+            else:
+                rect = (x0, cy1 + INNER_WALL_M / 2, x1, height - OUTER_WALL_M)
+                wall_y = cy1
+            door_w = float(np.round(rng.uniform(0.9, 1.6 if open_hall else 1.2), 2))
+            if open_hall and side == "north":
+                door_w = min(x1 - x0 - 0.6, float(np.round(rng.uniform(2.0, 2.5), 2)))  # wide opening into the hall
+            door_w = min(door_w, x1 - x0 - 1.0)
+            door_x = float(np.round(rng.uniform(x0 + door_w / 2 + 0.3, x1 - door_w / 2 - 0.3), 2))
+            rooms.append(_Room(kind, name, rect, (door_x, wall_y, door_w), list(items)))
+    return width, height, (cy0, cy1), rooms
+
+
+def _place_items(
+    room: _Room, rng: np.random.Generator, placed: list[np.ndarray]
+) -> list[tuple[str, np.ndarray, float]]:
+    from shapely.geometry import Point, Polygon
+
+    x0, y0, x1, y1 = room.rect
+    out = []
+    door = Point(room.door[0], room.door[1])
+    for item in room.items:
+        label, category, w, d, h = FURNITURE[item]
+        for _ in range(60):
+            rotate = rng.random() < 0.5
+            ww, dd = (d, w) if rotate else (w, d)
+            if ww > x1 - x0 - 0.8 or dd > y1 - y0 - 0.8:
+                continue
+            against_wall = rng.random() < 0.5
+            cx = rng.uniform(x0 + 0.4 + ww / 2, x1 - 0.4 - ww / 2)
+            if against_wall:
+                cy = (y0 + dd / 2 + 0.05) if rng.random() < 0.5 else (y1 - dd / 2 - 0.05)
+            else:
+                cy = rng.uniform(y0 + 0.4 + dd / 2, y1 - 0.4 - dd / 2)
+            corners = np.array(
+                [
+                    [cx - ww / 2, cy - dd / 2],
+                    [cx + ww / 2, cy - dd / 2],
+                    [cx + ww / 2, cy + dd / 2],
+                    [cx - ww / 2, cy + dd / 2],
+                ]
+            )
+            shape = Polygon(corners)
+            if shape.distance(door) < DOOR_CLEAR_M + room.door[2] / 2:
+                continue
+            if any(shape.distance(Polygon(p)) < 0.9 for p in placed):  # a walkway between furniture
+                continue
+            placed.append(corners)
+            out.append((item, np.round(corners, 3), h))
+            break
+    return out
+
+
+def _surface_cloud(width: float, height: float, walls: list[ProxyBox], furniture: list[ProxyBox], rng) -> GaussianCloud:
+    """Coloured Gaussians on the floor, the walls and the furniture boxes."""
+    parts, colours, scales = [], [], []
+    gx, gy = np.meshgrid(np.arange(0.15, width, 0.3), np.arange(0.15, height, 0.3))
+    floor = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+    parts.append(floor)
+    colours.append(np.tile([0.78, 0.74, 0.68], (len(floor), 1)) + rng.normal(0, 0.02, (len(floor), 3)))
+    scales.append(np.tile([0.15, 0.15, 0.01], (len(floor), 1)))
+    for boxes, base, step in ((walls, [0.92, 0.91, 0.88], 0.2), (furniture, [0.55, 0.42, 0.3], 0.12)):
+        for box in boxes:
+            fp = box.footprint
+            for a, b in zip(fp, np.roll(fp, -1, axis=0), strict=True):
+                length = np.linalg.norm(b - a)
+                s = np.arange(step / 2, length, step) / max(length, 1e-9)
+                z = np.arange(box.z_min + step / 2, box.z_max, step)
+                if len(s) == 0 or len(z) == 0:
+                    continue
+                ss, zz = np.meshgrid(s, z)
+                pts = np.column_stack(
+                    [a[0] + (b[0] - a[0]) * ss.ravel(), a[1] + (b[1] - a[1]) * ss.ravel(), zz.ravel()]
+                )
+                parts.append(pts)
+                tint = np.array(base) + rng.normal(0, 0.04, 3)
+                colours.append(np.tile(tint, (len(pts), 1)))
+                scales.append(np.tile([step / 2, step / 2, step / 2], (len(pts), 1)))
+    means = np.vstack(parts)
+    order = np.lexsort((means[:, 2], np.floor(means[:, 1]), np.floor(means[:, 0])))  # metre cells: tight chunks
+    means = means[order]
+    n = len(means)
+    return GaussianCloud(
+        means=means.astype(np.float32),
+        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+        log_scales=np.log(np.vstack(scales)[order]).astype(np.float32),
+        opacity_logits=np.full(n, 3.0, np.float32),
+        sh_dc=((np.clip(np.vstack(colours)[order], 0, 1) - 0.5) / SH_C0).astype(np.float32),
+    )
+
+
+def _wall(raster: Rasterizer, walls: list[ProxyBox], a, b, thickness: float, name: str) -> None:
+    """Draw a wall strip and record its collision box."""
+    a, b = np.array(a, float), np.array(b, float)
+    raster.segment(a, b, thickness, 0)
+    d = b - a
+    n = np.array([-d[1], d[0]]) / max(np.linalg.norm(d), 1e-9) * thickness / 2
+    walls.append(ProxyBox(name, np.round(np.array([a - n, b - n, b + n, a + n]), 3), 0.0, WALL_HEIGHT_M))
+
+
+def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) -> Path:
+    """One procedural package ``out_dir/scene_id`` for ``venue``; deterministic in (seed, scene_id)."""
+    for attempt in range(8):
+        rng = derive_rng(seed, scene_id, "generate", attempt)
+        width, height, (cy0, cy1), rooms = _layout(venue, rng)
+        raster = Rasterizer((0.0, 0.0), (width, height), RESOLUTION, fill=255)
+        walls: list[ProxyBox] = []
+
+        def wall(a, b, thickness, name, raster=raster, walls=walls):
+            _wall(raster, walls, a, b, thickness, name)
+
+        t = OUTER_WALL_M / 2
+        wall((t, t), (width - t, t), OUTER_WALL_M, "outer_south")
+        wall((width - t, t), (width - t, height - t), OUTER_WALL_M, "outer_east")
+        wall((width - t, height - t), (t, height - t), OUTER_WALL_M, "outer_north")
+        entrance_w = float(np.round(rng.uniform(1.2, min(2.2, cy1 - cy0)), 2))
+        ey = (cy0 + cy1) / 2
+        wall((t, height - t), (t, ey + entrance_w / 2), OUTER_WALL_M, "outer_west_north")
+        wall((t, ey - entrance_w / 2), (t, t), OUTER_WALL_M, "outer_west_south")
+        for k, room in enumerate(rooms):
+            x0, _, x1, _ = room.rect
+            dx, wy, dw = room.door
+            wall(
+                (x0 - INNER_WALL_M / 2 if x0 > OUTER_WALL_M else x0, wy), (dx - dw / 2, wy), INNER_WALL_M, f"wall_{k}_a"
+            )
+            wall(
+                (dx + dw / 2, wy),
+                (x1 + INNER_WALL_M / 2 if x1 < width - OUTER_WALL_M else x1, wy),
+                INNER_WALL_M,
+                f"wall_{k}_b",
+            )
+            if x1 < width - OUTER_WALL_M - 0.01:
+                far = room.rect[1] if wy == cy1 else room.rect[3]
+                wall((x1 + INNER_WALL_M / 2, wy), (x1 + INNER_WALL_M / 2, far), INNER_WALL_M, f"wall_{k}_side")
+        placed: list[np.ndarray] = []
+        objects, furniture, counts = [], [], {}
+        regions = [
+            Region(
+                id="corridor",
+                type="corridor",
+                name="corridor",
+                polygon=[(0.0, cy0), (width, cy0), (width, cy1), (0.0, cy1)],
+            )
+        ]
+        for k, room in enumerate(rooms):
+            rid = f"{room.kind}_{k + 1}"
+            x0, y0, x1, y1 = room.rect
+            regions.append(
+                Region(id=rid, type=room.kind, name=room.name, polygon=[(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            )
+            for item, corners, h in _place_items(room, rng, placed):
+                counts[item] = counts.get(item, 0) + 1
+                oid = f"{item}_{counts[item]}"
+                label, category = FURNITURE[item][:2]
+                objects.append(
+                    SceneObject(
+                        id=oid,
+                        label=label,
+                        category=category,
+                        footprint=[tuple(c) for c in corners.tolist()],
+                        z_max=h,
+                        region=rid,
+                    )
+                )
+                raster.polygon(corners, 0)
+                furniture.append(ProxyBox(oid, corners, 0.0, h))
+        ex = OUTER_WALL_M + 0.05
+        objects.append(
+            SceneObject(
+                id="entrance_1",
+                label="entrance",
+                category="entrance",
+                region="corridor",
+                footprint=[
+                    (0.0, ey - entrance_w / 2),
+                    (ex, ey - entrance_w / 2),
+                    (ex, ey + entrance_w / 2),
+                    (0.0, ey + entrance_w / 2),
+                ],
+                z_max=2.2,
+            )
+        )
+        cells = raster.cells
+        free = cells == 255
+        legal = clearance(free, RESOLUTION) >= 0.25 + RESOLUTION / 2
+        from scipy import ndimage
+
+        labels, n_parts = ndimage.label(legal, structure=np.ones((3, 3)))
+        if n_parts == 1:
+            break
+    smap = SemanticMap(
+        scene_id=scene_id,
+        venue_type=venue,
+        source="procedural",
+        name=f"procedural {venue}",
+        licence="CC0 (generated by SONG)",
+        bounds=(0.0, 0.0, width, height),
+        occupancy=OccupancySpec(resolution=RESOLUTION, origin=(0.0, 0.0)),
+        regions=regions,
+        objects=objects,
+    )
+    root = write_scene_package(Path(out_dir) / scene_id, smap, cells)
+    write_compressed_ply(root / GAUSSIANS, _surface_cloud(width, height, walls, furniture, rng))
+    write_usd_proxy(root / USD_PROXY, walls + furniture)
+    return root
+
+
+def generate_scenes(count: int, seed: int, out_dir: str | Path, venues: tuple[str, ...] = VENUE_ORDER) -> list[Path]:
+    """``count`` packages cycling through ``venues`` (ids ``<venue>_<k>``)."""
+    return [
+        generate_scene(f"{venues[k % len(venues)]}_{k:04d}", venues[k % len(venues)], seed, out_dir)
+        for k in range(count)
+    ]
