@@ -91,6 +91,11 @@ def _check_polygon(points: list[Point2], what: str) -> list[Point2]:
     from shapely.geometry import Polygon
 
     polygon = Polygon(points)
+    centred = [(x - points[0][0], y - points[0][1]) for x, y in points]
+    if all(abs(ax * by - ay * bx) <= 1e-12 for (ax, ay), (bx, by) in zip(centred, centred[1:], strict=False)):
+        raise ValueError(f"{what} is degenerate (zero area)")
+    if not polygon.exterior.is_simple:
+        raise ValueError(f"{what} is self-intersecting")
     if polygon.area <= 1e-9:
         raise ValueError(f"{what} is degenerate (zero area)")
     if not polygon.is_valid:

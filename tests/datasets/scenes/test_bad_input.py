@@ -1,0 +1,129 @@
+"""A catalogue of malformed packages: each gets its own one-line error naming the file and the field."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from song.cli import app
+from song.datasets.scenes import load_scene_package
+from song.errors import SceneError
+
+
+def _edit_map(fn: Callable[[dict], None]) -> Callable[[Path], None]:
+    def apply(root: Path) -> None:
+        data = json.loads((root / "semantic_map.json").read_text())
+        fn(data)
+        (root / "semantic_map.json").write_text(json.dumps(data))
+
+    return apply
+
+
+def _set(path: str, value) -> Callable[[Path], None]:
+    def fn(data: dict) -> None:
+        keys = path.split(".")
+        target = data
+        for key in keys[:-1]:
+            target = target[int(key)] if key.isdigit() else target[key]
+        last = keys[-1]
+        target[int(last) if last.isdigit() else last] = value
+
+    return _edit_map(fn)
+
+
+def _image(fn: Callable[[np.ndarray], np.ndarray]) -> Callable[[Path], None]:
+    def apply(root: Path) -> None:
+        cells = cv2.imread(str(root / "occupancy.png"), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(root / "occupancy.png"), fn(cells))
+
+    return apply
+
+
+def _write(name: str, data: bytes) -> Callable[[Path], None]:
+    return lambda root: (root / name).write_bytes(data)
+
+
+CATALOGUE: list[tuple[str, Callable[[Path], None], str, str]] = [
+    ("missing map", lambda r: (r / "semantic_map.json").unlink(), "semantic_map.json", "missing"),
+    ("missing occupancy", lambda r: (r / "occupancy.png").unlink(), "occupancy.png", "missing"),
+    ("wrong format", _set("format", "other.map"), "semantic_map.json: format", "expected"),
+    ("wrong version", _set("version", 2), "semantic_map.json: version", "unsupported version"),
+    ("nan coordinate", _set("objects.0.footprint.0.0", float("nan")), "objects[0].footprint", "finite"),
+    ("infinite bound", _set("bounds.2", float("inf")), "bounds", "finite"),
+    ("too few vertices", _set("objects.1.footprint", [[6, 3], [7, 3]]), "objects[1].footprint", "at least 3"),
+    (
+        "self-intersecting",
+        _set("regions.0.polygon", [[0, 0], [4, 4], [4, 0], [0, 4]]),
+        "regions[0].polygon",
+        "self-intersecting",
+    ),
+    ("degenerate polygon", _set("regions.1.polygon", [[4, 0], [5, 0], [6, 0]]), "regions[1].polygon", "degenerate"),
+    ("object outside", _set("objects.2.footprint", [[20, 20], [21, 20], [21, 21]]), "objects[2].footprint", "outside"),
+    ("duplicate id", _set("objects.1.id", "desk_1"), "objects[1].id", "duplicate"),
+    ("region/object id clash", _set("objects.0.id", "room_a"), "objects[0].id", "duplicate"),
+    ("unknown region", _set("objects.0.region", "attic"), "objects[0].region", "unknown region"),
+    ("z_max below z_min", _set("objects.0.z_min", 2.0), "objects[0].z_max", "below"),
+    ("resolution out of range", _set("occupancy.resolution", 0.9), "occupancy.resolution", "[0.01, 0.5]"),
+    ("image size mismatch", _set("bounds", [0, 0, 9, 4]), "occupancy.png: size", "bounds/resolution"),
+    ("origin off bounds", _set("occupancy.origin", [1.0, 0.0]), "occupancy.origin", "lower-left"),
+    ("no free space", _image(lambda c: np.zeros_like(c)), "occupancy.png: free", "largest free area"),
+    (
+        "odd pixel values",
+        _image(lambda c: np.where(c == 255, 200, c).astype(np.uint8)),
+        "occupancy.png: pixels",
+        "unexpected values",
+    ),
+    ("colour image", _image(lambda c: np.dstack([c, c, c])), "occupancy.png", "single-channel"),
+    ("not a png", _write("occupancy.png", b"\x89PNG\r\n\x1a\n broken"), "occupancy.png", "readable PNG"),
+    ("non-utf8 json", _write("semantic_map.json", b'{"scene_id": "\xff\xfe"}'), "semantic_map.json", "UTF-8"),
+    ("invalid json", _write("semantic_map.json", b'{"scene_id": '), "semantic_map.json", "not valid JSON"),
+    ("json array", _write("semantic_map.json", b"[1, 2]"), "semantic_map.json", "JSON object"),
+    ("scene id with slash", _set("scene_id", "a/b"), "semantic_map.json: scene_id", "path separators"),
+    ("scene id with dots", _set("scene_id", "..x"), "semantic_map.json: scene_id", "path separators"),
+    ("scene id not folder", _set("scene_id", "other"), "semantic_map.json: scene_id", "folder name"),
+    ("unknown field", _set("colour", "red"), "semantic_map.json: colour", "Extra inputs"),
+    ("path in occupancy", _set("occupancy.path", "../x.png"), "occupancy.path", "file name"),
+]
+
+
+@pytest.mark.parametrize(("name", "damage", "where", "what"), CATALOGUE, ids=[c[0] for c in CATALOGUE])
+def test_each_problem_has_its_own_message(make_scene, name: str, damage, where: str, what: str) -> None:
+    root = make_scene()
+    damage(root)
+    with pytest.raises(SceneError) as info:
+        load_scene_package(root)
+    message = str(info.value)
+    assert "\n" not in message
+    assert where in message and what in message, message
+    assert str(root) in message
+
+
+def test_messages_are_distinct(make_scene, tmp_path: Path) -> None:
+    seen = set()
+    for index, (_, damage, _, _) in enumerate(CATALOGUE):
+        root = make_scene(f"s{index}", root=tmp_path / f"c{index}")
+        damage(root)
+        with pytest.raises(SceneError) as info:
+            load_scene_package(root)
+        seen.add(str(info.value).replace(str(root), ""))
+    assert len(seen) >= 20
+
+
+def test_check_command_carries_on(make_scene, tmp_path: Path) -> None:
+    good = make_scene("good")
+    bad = make_scene("bad")
+    _set("version", 3)(bad)
+    broken = make_scene("broken")
+    (broken / "occupancy.png").unlink()
+    result = CliRunner().invoke(app, ["scenes", "check", str(good.parent)])
+    assert result.exit_code == 1
+    text = " ".join(result.output.split())
+    assert "good" in text and "2 failed" in text and "1 ok" in text
+    ok = CliRunner().invoke(app, ["scenes", "check", str(good)])
+    assert ok.exit_code == 0, ok.output
