@@ -48,17 +48,22 @@ def check(folder: Path = typer.Argument(..., help="a scene package, or a folder 
 @scenes_app.command("import")
 @handle_errors
 def import_scenes(
-    kind: str = typer.Argument(..., help="procthor"),
+    kind: str = typer.Argument(..., help="procthor | interiorgs"),
     src: Path = typer.Argument(..., help="house JSON, a folder of them, or a .jsonl/.jsonl.gz"),
     out: Path = typer.Option(..., "--out", help="folder for the scene packages"),
     resolution: float = typer.Option(0.05, "--resolution", min=0.01, max=0.5, help="occupancy cell size, m"),
 ) -> None:
     """Convert real layouts into scene packages; one bad house fails alone."""
-    if kind != "procthor":
-        raise typer.BadParameter(f"unknown importer '{kind}'; available: procthor")
-    from song.datasets.scenes.procthor import import_procthor
+    if kind == "procthor":
+        from song.datasets.scenes.procthor import import_procthor
 
-    results = import_procthor(src, out, resolution=resolution)
+        results = import_procthor(src, out, resolution=resolution)
+    elif kind == "interiorgs":
+        from song.datasets.scenes.interiorgs import import_interiorgs
+
+        results = import_interiorgs(src, out)
+    else:
+        raise typer.BadParameter(f"unknown importer '{kind}'; available: procthor, interiorgs")
     rows = [{"scene": r.scene_id, "status": "ok" if r.path else "failed", "problem": r.error} for r in results]
     console.print(status_table(f"imported into {out}", rows, ["scene", "status", "problem"]))
     if any(r.path is None for r in results):
