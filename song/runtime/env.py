@@ -21,6 +21,7 @@ from song.runtime.loop import EpisodeRunner
 from song.runtime.observation import Observation, ScanConfig
 
 ENV_ID = f"song/SongNav-v{schema_major(SCHEMA_VERSION)}"
+GOAL_RANGE_M = 1000.0  # observation bound for the robot-frame goal (scenes are far smaller)
 
 try:
     import gymnasium as gym
@@ -64,8 +65,12 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         )
         self.observation_space = spaces.Dict(
             {
-                "goal": spaces.Box(-np.inf, np.inf, shape=(2,), dtype=np.float32),
-                "velocity": spaces.Box(-np.inf, np.inf, shape=(2,), dtype=np.float32),
+                "goal": spaces.Box(-GOAL_RANGE_M, GOAL_RANGE_M, shape=(2,), dtype=np.float32),
+                "velocity": spaces.Box(
+                    low=np.array([0.0, -max_w], dtype=np.float32),
+                    high=np.array([self.robot.max_speed_mps, max_w], dtype=np.float32),
+                    dtype=np.float32,
+                ),
                 "scan": spaces.Box(0.0, self.scan.max_range_m, shape=(self.scan.n_rays,), dtype=np.float32),
             }
         )
@@ -73,7 +78,7 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
 
     def _obs(self, observation: Observation) -> dict[str, np.ndarray]:
         return {
-            "goal": observation.goal.astype(np.float32),
+            "goal": np.clip(observation.goal, -GOAL_RANGE_M, GOAL_RANGE_M).astype(np.float32),
             "velocity": observation.velocity.astype(np.float32),
             "scan": np.clip(observation.scan, 0.0, self.scan.max_range_m).astype(np.float32),
         }
