@@ -96,8 +96,11 @@ def agent_lines(
     return points, direction, valid
 
 
-def _lp1(points, dirs, valid, line, radius, opt, rows):
-    """linearProgram1 for the agents ``rows`` on their line ``line``; returns (ok, result)."""
+def _lp1(points, dirs, valid, line, radius, opt, rows, direction_opt=False):
+    """linearProgram1 for the agents ``rows`` on their line ``line``; returns (ok, result).
+
+    With ``direction_opt`` (used by linearProgram3), ``opt`` is a unit direction to go furthest along.
+    """
     p = points[rows, line]
     d = dirs[rows, line]
     dot = (p * d).sum(-1)
@@ -116,23 +119,28 @@ def _lp1(points, dirs, valid, line, radius, opt, rows):
         t_right = np.where(cut & (denom >= 0.0), np.minimum(t_right, t), t_right)
         t_left = np.where(cut & (denom < 0.0), np.maximum(t_left, t), t_left)
         ok &= t_left <= t_right
-    t = (d * (opt[rows] - p)).sum(-1)
-    t = np.clip(t, t_left, t_right)
+    if direction_opt:
+        t = np.where((opt[rows] * d).sum(-1) > 0.0, t_right, t_left)
+    else:
+        t = np.clip((d * (opt[rows] - p)).sum(-1), t_left, t_right)
     return ok, p + t[:, None] * d
 
 
-def _lp2(points, dirs, valid, radius, opt):
+def _lp2(points, dirs, valid, radius, opt, direction_opt=False):
     """linearProgram2 for all agents; returns (result (N, 2), first failing line (N,), −1 = none)."""
     n, k = valid.shape
     speed = np.linalg.norm(opt, axis=1)
-    result = np.where((speed > radius)[:, None], opt / np.maximum(speed, 1e-300)[:, None] * radius[:, None], opt)
+    if direction_opt:
+        result = opt * radius[:, None]
+    else:
+        result = np.where((speed > radius)[:, None], opt / np.maximum(speed, 1e-300)[:, None] * radius[:, None], opt)
     fail = np.full(n, -1)
     for i in range(k):
         viol = valid[:, i] & (fail < 0) & (_det(dirs[:, i], points[:, i] - result) > 0.0)
         rows = np.flatnonzero(viol)
         if len(rows) == 0:
             continue
-        ok, new = _lp1(points, dirs, valid, i, radius, opt, rows)
+        ok, new = _lp1(points, dirs, valid, i, radius, opt, rows, direction_opt)
         result[rows[ok]] = new[ok]
         fail[rows[~ok]] = i
     return result, fail
@@ -167,51 +175,12 @@ def _lp3_single(points, dirs, valid, begin, radius, result):
         if proj_p:
             pp, dd = np.array(proj_p)[None], np.array(proj_d)[None]
             vv = np.ones((1, len(proj_p)), dtype=bool)
-            res, fail = _lp2_dir(pp, dd, vv, np.array([radius]), opt[None])
+            res, fail = _lp2(pp, dd, vv, np.array([radius]), opt[None], direction_opt=True)
             result = temp if fail[0] >= 0 else res[0]
         else:
             result = opt * radius
         distance = _det(d_i, p_i - result)
     return result
-
-
-def _lp2_dir(points, dirs, valid, radius, direction):
-    """linearProgram2 with ``directionOpt``: optimise along a unit direction (used by linearProgram3)."""
-    n, k = valid.shape
-    result = direction * radius[:, None]
-    fail = np.full(n, -1)
-    for i in range(k):
-        viol = valid[:, i] & (fail < 0) & (_det(dirs[:, i], points[:, i] - result) > 0.0)
-        rows = np.flatnonzero(viol)
-        if len(rows) == 0:
-            continue
-        ok, new = _lp1_dir(points, dirs, valid, i, radius, direction, rows)
-        result[rows[ok]] = new[ok]
-        fail[rows[~ok]] = i
-    return result, fail
-
-
-def _lp1_dir(points, dirs, valid, line, radius, direction, rows):
-    p = points[rows, line]
-    d = dirs[rows, line]
-    dot = (p * d).sum(-1)
-    disc = dot**2 + radius[rows] ** 2 - (p**2).sum(-1)
-    ok = disc >= 0.0
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    t_left, t_right = -dot - sq, -dot + sq
-    for j in range(line):
-        use = valid[rows, j]
-        denom = _det(d, dirs[rows, j])
-        numer = _det(dirs[rows, j], p - points[rows, j])
-        parallel = use & (np.abs(denom) <= EPS)
-        ok &= ~(parallel & (numer < 0.0))
-        t = numer / np.where(np.abs(denom) <= EPS, 1.0, denom)
-        cut = use & ~parallel
-        t_right = np.where(cut & (denom >= 0.0), np.minimum(t_right, t), t_right)
-        t_left = np.where(cut & (denom < 0.0), np.maximum(t_left, t), t_left)
-        ok &= t_left <= t_right
-    t = np.where((direction[rows] * d).sum(-1) > 0.0, t_right, t_left)
-    return ok, p + t[:, None] * d
 
 
 def orca_step(
