@@ -29,7 +29,7 @@ EPISODES ?= 120
 demo: setup
 	$(SONG) scenes check $(SCENES)
 	$(SONG) synth --scenes $(SCENES) --out $(RUN) --workers 2
-	$(SONG) grade --run $(RUN) --episodes $(EPISODES)
+	$(SONG) grade --run $(RUN) --episodes $(EPISODES) --workers 2
 	rm -rf $(BENCH)
 	SOURCE_DATE_EPOCH=1700000000 $(SONG) export-bench --run $(RUN) --bench $(BENCH) --version 1.0.0 --notes "make demo"
 	$(SONG) bench verify $(BENCH)

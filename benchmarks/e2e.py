@@ -59,7 +59,7 @@ def main() -> None:
     )
     run(
         "grade",
-        ["grade", "--run", str(run_dir), "--episodes", str(args.episodes)],
+        ["grade", "--run", str(run_dir), "--episodes", str(args.episodes), "--workers", str(args.workers)],
         record,
     )
     shutil.rmtree(bench, ignore_errors=True)

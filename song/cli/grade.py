@@ -16,9 +16,10 @@ from song.pipeline.grading import grade_run
 def grade(
     run: Path = typer.Option(..., "--run", help="run folder made by song synth"),
     episodes: int | None = typer.Option(None, "--episodes", min=1, help="total episodes (default: config, 500)"),
+    workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes (scenes in parallel)"),
 ) -> None:
     """Sample robot episodes over all scenes, grade them easy/medium/hard, write RUN/manifest/."""
-    result = grade_run(run, n_episodes=episodes)
+    result = grade_run(run, n_episodes=episodes, workers=workers)
     rows = [{"difficulty": d, **{m: str(c) for m, c in modes.items()}} for d, modes in result.summary["counts"].items()]
     modes = list(next(iter(result.summary["counts"].values())).keys())
     console.print(

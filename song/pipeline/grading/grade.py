@@ -138,8 +138,31 @@ def _quotas(scene_ids: list[str], total: int) -> dict[str, int]:
     return {sid: base + (1 if i < extra else 0) for i, sid in enumerate(scene_ids)}
 
 
-def grade_run(run_dir: str | Path, config: SongConfig | None = None, n_episodes: int | None = None) -> GradingResult:
-    """Sample, measure and grade episodes over every scene of a run; write the manifest."""
+def _scene_job(args: tuple[str, str, str, str, int]):
+    scene_id, scenes_dir, run_dir, config_json, quota = args
+    config = SongConfig.model_validate_json(config_json)
+    return scene_id, *_scene_episodes(scene_id, Path(scenes_dir), Path(run_dir), config, quota)
+
+
+def _map_scenes(jobs: list[tuple], workers: int):
+    if workers <= 1 or len(jobs) <= 1:
+        yield from map(_scene_job, jobs)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield from pool.map(_scene_job, jobs, chunksize=max(1, len(jobs) // (8 * workers)))
+
+
+def grade_run(
+    run_dir: str | Path, config: SongConfig | None = None, n_episodes: int | None = None, workers: int = 1
+) -> GradingResult:
+    """Sample, measure and grade episodes over every scene of a run; write the manifest.
+
+    Scenes are sampled independently (seeds per scene and episode), optionally in ``workers``
+    processes; the manifest does not depend on the worker count.
+    """
     run_dir = Path(run_dir)
     scenes_dir, run_config = read_run(run_dir)
     config = config or run_config
@@ -148,8 +171,8 @@ def grade_run(run_dir: str | Path, config: SongConfig | None = None, n_episodes:
     scene_ids = sorted(p.name for p in (run_dir / "scenes").iterdir() if (p / "crowd.parquet").is_file())
     rows, infeasible = [], {}
     quotas = _quotas(scene_ids, total)
-    for scene_id in scene_ids:
-        got, why = _scene_episodes(scene_id, scenes_dir, run_dir, config, quotas[scene_id])
+    jobs = [(sid, str(scenes_dir), str(run_dir), config.model_dump_json(), quotas[sid]) for sid in scene_ids]
+    for scene_id, got, why in _map_scenes(jobs, workers):
         rows += got
         if why:
             infeasible[scene_id] = why

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from song.config import GradingConfig
 from song.datasets.scenes import ScenePackage
@@ -32,6 +33,7 @@ class RobotMap:
     xy: np.ndarray  # (n, 2) world centres of the graph's cells
 
     graph: GridGraph | None = None
+    labels: np.ndarray | None = None  # connected components of ``legal`` (cheap reachability test)
 
     @classmethod
     def build(cls, package: ScenePackage, radius: float) -> RobotMap:
@@ -40,7 +42,13 @@ class RobotMap:
         room = clearance(grid.free, grid.resolution)
         legal = room >= radius + 0.5 * grid.resolution
         graph = grid_graph(legal)
-        return cls(package, legal, room, grid.to_world(graph.cells), graph)
+        labels, _ = ndimage.label(legal, structure=np.ones((3, 3)))
+        return cls(package, legal, room, grid.to_world(graph.cells), graph, labels)
+
+    def connected(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Same walkable component (no path search needed to reject the rest)."""
+        ra, rb = self.package.occupancy.to_cell(np.stack([a, b]))
+        return bool(self.labels[tuple(ra)] and self.labels[tuple(ra)] == self.labels[tuple(rb)])
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
         """Smoothed A*-optimal path (K, 2) between two legal points, or None when unreachable."""
@@ -136,6 +144,10 @@ class EpisodeSampler:
                     continue
             if start is None or goal is None:
                 reason = "no traversable cell near the pedestrian's endpoints"
+                continue
+            straight = float(np.linalg.norm(goal - start))  # a lower bound of L*: reject before searching
+            if straight > cfg.max_path_m or not self.robot.connected(start, goal):
+                reason = "goal unreachable or farther than the longest allowed path"
                 continue
             path = self.robot.plan(start, goal)
             if path is None:
