@@ -59,15 +59,16 @@ def grid_graph(mask: np.ndarray) -> GridGraph:
     return GridGraph(mask=mask, index=index, cells=cells, matrix=matrix)
 
 
-def distances_from(graph: GridGraph, start: tuple[int, int], with_path: bool = False):
-    """Geodesic distances (cells) from ``start`` to every node (inf where unreachable).
+def distances_from(graph: GridGraph, start: tuple[int, int], with_path: bool = False, limit: float = np.inf):
+    """Geodesic distances (cells) from ``start`` to every node (inf where unreachable or beyond ``limit``).
 
-    Returns ``dist (n,)`` or ``(dist, predecessors)`` when ``with_path``.
+    Returns ``dist (n,)`` or ``(dist, predecessors)`` when ``with_path``. A finite ``limit`` (cells)
+    stops the search early, which makes a query for a nearby goal cheap.
     """
     node = graph.index[start]
     if node < 0:
         raise ValueError(f"start cell {start} is not on the graph")
-    return csgraph.dijkstra(graph.matrix, directed=False, indices=int(node), return_predecessors=with_path)
+    return csgraph.dijkstra(graph.matrix, directed=False, indices=int(node), return_predecessors=with_path, limit=limit)
 
 
 def path_cells(

@@ -67,8 +67,14 @@ class _Corridors:
 
     def corners(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
         a, b = self.cell(start), self.cell(goal)
-        dist, pred = distances_from(self.graph, a, with_path=True)
-        cells = path_cells(self.graph, dist, pred, b)
+        # search no farther than a generous multiple of the straight distance first (cheap), then everywhere
+        straight = float(np.hypot(a[0] - b[0], a[1] - b[1]))
+        cells = None
+        for limit in (2.0 * straight + 40.0, np.inf):
+            dist, pred = distances_from(self.graph, a, with_path=True, limit=limit)
+            cells = path_cells(self.graph, dist, pred, b)
+            if cells is not None:
+                break
         if cells is None:
             return None
         pts = self.grid.to_world(shortcut(self.mask, cells))
