@@ -12,6 +12,8 @@ imports the known stage modules in pipeline order.
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import importlib
 import json
 import os
@@ -154,6 +156,17 @@ def _outputs_intact(scene_dir: Path, outputs: dict[str, str]) -> bool:
     return True
 
 
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """sha256 over the package's Python sources: a code change invalidates recorded stage results."""
+    root = Path(song.__file__).parent
+    digest = hashlib.sha256(song.__version__.encode())
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
 def stage_input_hash(stage: Stage, scene: ScenePackage, config: SongConfig, record: dict[str, Any]) -> str:
     """Hash of everything a stage's outputs depend on."""
     section = getattr(config, stage.config_section) if stage.config_section else None
@@ -164,7 +177,7 @@ def stage_input_hash(stage: Stage, scene: ScenePackage, config: SongConfig, reco
             "depends": {dep: record.get(dep, {}).get("outputs", {}) for dep in stage.depends},
             "config": config_hash(section) if section is not None else "",
             "seed": config.seed,
-            "code": song.__version__,
+            "code": code_fingerprint(),
         }
     )
 
