@@ -63,6 +63,7 @@ class IntentSet(BaseModel):
     description: str = Field("", description="prompt A's human-centric scene description")
     intents: list[Intent]
     rejected: list[RejectedIntent] = []
+    llm_error: str = Field("", description="why the LLM path fell back to the offline model, if it did")
 
 
 def load_intents(scene_dir: str | Path) -> IntentSet:

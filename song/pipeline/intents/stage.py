@@ -2,17 +2,27 @@
 
 from __future__ import annotations
 
+import json
+import os
+from pathlib import Path
+
 import numpy as np
 
 from song.config import SongConfig
 from song.datasets.scenes import ScenePackage
+from song.errors import MissingDependencyError
 from song.pipeline.chain import StageContext
+from song.pipeline.intents.llm import GeminiClient, LLMError, OpenAICompatibleClient, scrub, structured_call
 from song.pipeline.intents.model import INTENTS_FILE, Intent, IntentSet, Provenance, RejectedIntent
 from song.pipeline.intents.navigation import Walkable, snap_points, walkable
 from song.pipeline.intents.offline import OfflineIntentModel
+from song.pipeline.intents.schemas import RoutineSelection, SceneDescription, load_prompt
 from song.util import write_json_atomic
 
-MAX_SOURCE_OBJECTS = 16  # objects from which geodesics are estimated for pair proposals
+MAX_SOURCE_OBJECTS = 16
+MAX_CANDIDATES = (
+    40  # candidate pairs listed in prompt B  # objects from which geodesics are estimated for pair proposals
+)
 
 
 def pedestrian_count(area_m2: float, config: SongConfig) -> int:
@@ -117,22 +127,87 @@ def filter_intents(
     return kept, rejected
 
 
-def generate_intents(package: ScenePackage, config: SongConfig, rng: np.random.Generator) -> IntentSet:
-    """Offline proposals → filtered intents for one scene."""
+def choose_provider(llm: str) -> str:
+    """``auto`` → gemini when a Gemini/Google key is set, else offline."""
+    if llm != "auto":
+        return llm
+    return "gemini" if os.environ.get("GOOGLE_API_KEY") or os.environ.get("GEMINI_API_KEY") else "offline"
+
+
+def make_client(provider: str, config: SongConfig):
+    cfg = config.intents
+    if provider == "gemini":
+        return GeminiClient(cfg.gemini_model, cfg.timeout_s, base_url=os.environ.get("SONG_GEMINI_BASE_URL"))
+    return OpenAICompatibleClient(cfg.openai_base_url, cfg.openai_model, cfg.timeout_s)
+
+
+def _scene_summary(package: ScenePackage) -> str:
+    smap = package.semantic_map
+    regions = [{"id": r.id, "type": r.type, "name": r.name} for r in smap.regions]
+    objects = [{"id": o.id, "label": o.label, "category": o.category, "region": o.region} for o in smap.objects]
+    return json.dumps({"venue_type": smap.venue_type, "regions": regions, "objects": objects}, sort_keys=True)
+
+
+def llm_proposals(package: ScenePackage, geodesic: dict, n: int, config: SongConfig, client, cache_dir: Path | None):
+    """Prompt A (scene description) then prompt B (routine selection) → (proposals, description)."""
+    cfg = config.intents
+    call = {
+        "cache_dir": cache_dir,
+        "max_retries": cfg.max_retries,
+        "backoff_s": cfg.backoff_base_s,
+        "max_concurrency": cfg.max_concurrency,
+    }
+    description = structured_call(
+        client, load_prompt("scene_description").format(scene=_scene_summary(package)), SceneDescription, **call
+    )
+    best = sorted(geodesic.items(), key=lambda item: (-item[1], item[0]))[:MAX_CANDIDATES]
+    candidates = "\n".join(f"- {a} -> {b}: {length:.1f} m" for (a, b), length in best)
+    prompt = load_prompt("route_selection").format(
+        description=description.description, candidates=candidates, count=2 * n, venue=package.semantic_map.venue_type
+    )
+    selection = structured_call(client, prompt, RoutineSelection, **call)
+    return [(r.start_object, r.goal_object, r.activity) for r in selection.routines], description.description
+
+
+def generate_intents(
+    package: ScenePackage, config: SongConfig, rng: np.random.Generator, cache_dir: Path | None = None
+) -> IntentSet:
+    """Proposals (LLM or offline) → filtered intents for one scene; an LLM failure falls back to offline."""
     walk = walkable(package, config.crowd.agent_radius_m)
     regions = {region.id: region.polygon for region in package.semantic_map.regions}
     snaps = {obj.id: snap_points(walk, obj.footprint, regions.get(obj.region)) for obj in package.semantic_map.objects}
     snaps = {k: v for k, v in snaps.items() if len(v)}
     n = pedestrian_count(walk.area_m2, config)
-    model = OfflineIntentModel()
-    proposals = model.propose(package.semantic_map, _pair_geodesics(walk, snaps, rng), 2 * n, rng)
-    provenance = Provenance(provider="offline", model=model.model)
+    geodesic = _pair_geodesics(walk, snaps, rng)
+    provider = choose_provider(config.intents.llm)
+    description, llm_error = "", ""
+    offline = OfflineIntentModel()
+    if provider != "offline":
+        try:
+            client = make_client(provider, config)
+            proposals, description = llm_proposals(package, geodesic, n, config, client, cache_dir)
+            provenance = Provenance(provider=provider, model=client.model)
+        except (LLMError, MissingDependencyError) as exc:
+            llm_error = scrub(str(exc))
+            model = config.intents.gemini_model if provider == "gemini" else config.intents.openai_model
+            provenance = Provenance(provider=provider, model=model, fallback=True)
+            proposals = offline.propose(package.semantic_map, geodesic, 2 * n, rng)
+    else:
+        provenance = Provenance(provider="offline", model=offline.model)
+        proposals = offline.propose(package.semantic_map, geodesic, 2 * n, rng)
     kept, rejected = filter_intents(proposals, package, walk, snaps, config, provenance, rng, n)
-    return IntentSet(scene_id=package.scene_id, provenance=provenance, intents=kept, rejected=rejected)
+    return IntentSet(
+        scene_id=package.scene_id,
+        provenance=provenance,
+        description=description,
+        intents=kept,
+        rejected=rejected,
+        llm_error=llm_error,
+    )
 
 
 def run_intents(ctx: StageContext) -> list[str]:
     """Stage entry: write ``intents.json``."""
-    intents = generate_intents(ctx.scene, ctx.config, ctx.rng("intents"))
+    intents = generate_intents(ctx.scene, ctx.config, ctx.rng("intents"), cache_dir=ctx.run_dir / "llm_cache")
     write_json_atomic(ctx.scene_dir / INTENTS_FILE, intents.model_dump(mode="json"))
     return [INTENTS_FILE]

@@ -50,3 +50,20 @@ def test_venues_have_different_vocabularies(make_scene) -> None:
 def test_stage_output_is_recorded(sample_run: Path) -> None:
     data = json.loads((sample_run / "scenes/procthor_house_6/intents.json").read_text())
     assert data["provenance"]["provider"] == "offline" and data["intents"]
+
+
+def test_intents_command_reruns_one_scene(sample_run: Path, tmp_path: Path) -> None:
+    import shutil
+
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    run = tmp_path / "run"
+    shutil.copytree(sample_run, run)
+    before = (run / "scenes/procthor_house_1/intents.json").read_bytes()
+    result = CliRunner().invoke(
+        app, ["intents", "--run", str(run), "--scene", "procthor_house_1", "--llm", "offline", "-j", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    assert (run / "scenes/procthor_house_1/intents.json").read_bytes() == before  # same seed, same intents

@@ -1,0 +1,116 @@
+"""LLM paths against local fake servers (no test touches the internet): the real google-genai SDK
+against a fake ``generateContent``, and the OpenAI-compatible client against a fake chat endpoint."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.config import SongConfig
+from song.datasets.scenes import load_scene_package
+from song.pipeline.intents import generate_intents
+from tests.pipeline.intents.fake_llm import FakeServer
+
+KEY = "test-key-SECRET-1234567890"
+DESC = json.dumps({"description": "An office: desk_1 in room_a, sofa_1 in room_b, printer_1 near the door."})
+
+
+def routines(*pairs: tuple[str, str]) -> str:
+    return json.dumps(
+        {"routines": [{"start_object": a, "goal_object": b, "activity": f"walks from {a} to {b}"} for a, b in pairs]}
+    )
+
+
+GOOD = routines(("desk_1", "sofa_1"), ("printer_1", "sofa_1"))
+
+
+def _run(make_scene, tmp_path: Path, monkeypatch, kind: str, script, **intents_cfg):
+    pytest.importorskip("google.genai")
+    server = FakeServer(kind, script)
+    try:
+        if kind == "gemini":
+            monkeypatch.setenv("GOOGLE_API_KEY", KEY)
+            monkeypatch.setenv("SONG_GEMINI_BASE_URL", server.url)
+            cfg = {"llm": "auto", **intents_cfg}
+        else:
+            monkeypatch.setenv("OPENAI_API_KEY", KEY)
+            cfg = {"llm": "openai", "openai_base_url": server.url + "/v1", "openai_model": "qwen-local", **intents_cfg}
+        config = SongConfig(intents={"backoff_base_s": 0.01, "timeout_s": 2.0, **cfg})
+        package = load_scene_package(make_scene())
+        result = generate_intents(package, config, np.random.default_rng(0), cache_dir=tmp_path / "cache")
+        return result, server
+    finally:
+        server.close()
+
+
+def _no_key_anywhere(tmp_path: Path, result) -> None:
+    assert KEY not in result.model_dump_json()
+    for path in tmp_path.rglob("*"):
+        if path.is_file():
+            assert KEY.encode() not in path.read_bytes(), path
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_success_uses_structured_output_and_caches(make_scene, tmp_path, monkeypatch, kind) -> None:
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(200, DESC, 0), (200, GOOD, 0)])
+    assert result.provenance.provider == kind and not result.provenance.fallback
+    assert {(i.start_object, i.goal_object) for i in result.intents} <= {("desk_1", "sofa_1"), ("printer_1", "sofa_1")}
+    assert result.intents and result.description.startswith("An office")
+    first = server.requests[0]
+    if kind == "gemini":
+        assert (
+            ":generateContent" in first["path"]
+            and first["body"]["generationConfig"]["responseMimeType"] == "application/json"
+        )
+        assert (
+            "responseSchema" in first["body"]["generationConfig"]
+            or "responseJsonSchema" in first["body"]["generationConfig"]
+        )
+    else:
+        assert first["path"] == "/v1/chat/completions" and first["body"]["response_format"]["type"] == "json_schema"
+    _no_key_anywhere(tmp_path, result)
+    again, server2 = _run(make_scene, tmp_path, monkeypatch, kind, [])  # cached: no request at all
+    assert server2.requests == [] and again.model_dump_json() == result.model_dump_json()
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_429_then_success(make_scene, tmp_path, monkeypatch, kind) -> None:
+    result, server = _run(
+        make_scene, tmp_path, monkeypatch, kind, [(429, "", 0), (200, DESC, 0), (503, "", 0), (200, GOOD, 0)]
+    )
+    assert not result.provenance.fallback and len(server.requests) == 4
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_persistent_500_falls_back_and_records(make_scene, tmp_path, monkeypatch, kind) -> None:
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(500, "", 0)] * 10, max_retries=2)
+    assert result.provenance.fallback and result.provenance.provider == kind
+    assert "500" in result.llm_error and result.intents  # the offline model stood in
+    assert len(server.requests) == 3
+    _no_key_anywhere(tmp_path, result)
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_malformed_json_is_repaired(make_scene, tmp_path, monkeypatch, kind) -> None:
+    result, server = _run(
+        make_scene, tmp_path, monkeypatch, kind, [(200, "{not json", 0), (200, DESC, 0), (200, GOOD, 0)]
+    )
+    assert not result.provenance.fallback and "not valid JSON" in server.requests[1]["body"].__repr__()
+
+
+def test_unknown_object_ids_are_rejected_with_reasons(make_scene, tmp_path, monkeypatch) -> None:
+    reply = routines(("desk_1", "sofa_1"), ("ghost_9", "sofa_1"), ("desk_1", "nowhere_2"))
+    result, _ = _run(make_scene, tmp_path, monkeypatch, "gemini", [(200, DESC, 0), (200, reply, 0)])
+    reasons = {(r.start_object, r.goal_object): r.reason for r in result.rejected}
+    assert reasons[("ghost_9", "sofa_1")] == "unknown_object" and reasons[("desk_1", "nowhere_2")] == "unknown_object"
+    assert [(i.start_object, i.goal_object) for i in result.intents] == [("desk_1", "sofa_1")]
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_slow_reply_times_out_then_falls_back(make_scene, tmp_path, monkeypatch, kind) -> None:
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(200, DESC, 3.0)] * 3, max_retries=1, timeout_s=0.5)
+    assert result.provenance.fallback and result.intents
+    assert "time" in result.llm_error.lower()
