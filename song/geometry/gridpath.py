@@ -68,7 +68,17 @@ def distances_from(graph: GridGraph, start: tuple[int, int], with_path: bool = F
     node = graph.index[start]
     if node < 0:
         raise ValueError(f"start cell {start} is not on the graph")
-    return csgraph.dijkstra(graph.matrix, directed=False, indices=int(node), return_predecessors=with_path, limit=limit)
+    # the matrix already holds both directions of every edge, so the directed search is exact and avoids
+    # scipy symmetrising (copying) the matrix on every call
+    return csgraph.dijkstra(graph.matrix, directed=True, indices=int(node), return_predecessors=with_path, limit=limit)
+
+
+def distances_from_many(graph: GridGraph, starts: np.ndarray) -> np.ndarray:
+    """(S, n) geodesic distances (cells) from several start cells (S, 2) in one compiled call."""
+    nodes = graph.index[starts[:, 0], starts[:, 1]]
+    if (nodes < 0).any():
+        raise ValueError("a start cell is not on the graph")
+    return np.atleast_2d(csgraph.dijkstra(graph.matrix, directed=True, indices=nodes))
 
 
 def path_cells(

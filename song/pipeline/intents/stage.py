@@ -44,8 +44,8 @@ def _pair_geodesics(
         ids if len(ids) <= MAX_SOURCE_OBJECTS else sorted(rng.choice(ids, MAX_SOURCE_OBJECTS, replace=False).tolist())
     )
     out = {}
-    for a in sources:
-        dist, _ = walk.geodesic_from(snaps[a][0])
+    rows, _ = walk.geodesics_from(np.array([snaps[a][0] for a in sources]))
+    for a, dist in zip(sources, rows, strict=True):
         for b in ids:
             if b != a:
                 length = walk.geodesic(dist, snaps[b][0])
@@ -70,6 +70,14 @@ def filter_intents(
     kept: list[Intent] = []
     rejected: list[RejectedIntent] = []
     routes = set()
+    ends = {}  # facing start/goal points of every proposal between known, reachable objects
+    for start_id, goal_id, _ in proposals:
+        if len(snaps.get(start_id, ())) and len(snaps.get(goal_id, ())) and start_id in objects and goal_id in objects:
+            start = _facing(snaps[start_id], np.mean(objects[goal_id].footprint, axis=0))
+            ends[(start_id, goal_id)] = (start, _facing(snaps[goal_id], start))
+    keys = sorted(ends)
+    rows = walk.geodesics_from(np.array([ends[k][0] for k in keys]))[0] if keys else []
+    distance_rows = dict(zip(keys, rows, strict=True))
     for start_id, goal_id, activity in proposals:
         base = {"activity": activity, "start_object": start_id, "goal_object": goal_id}
         if start_id not in objects or goal_id not in objects:
@@ -82,11 +90,8 @@ def filter_intents(
         if (start_id, goal_id) in routes:
             rejected.append(RejectedIntent(**base, reason="duplicate"))
             continue
-        goal_centre = np.mean(objects[goal_id].footprint, axis=0)
-        start = _facing(snaps[start_id], goal_centre)
-        goal = _facing(snaps[goal_id], start)
-        dist, _ = walk.geodesic_from(start)
-        length = walk.geodesic(dist, goal)
+        start, goal = ends[(start_id, goal_id)]
+        length = walk.geodesic(distance_rows[(start_id, goal_id)], goal)
         if not np.isfinite(length):
             rejected.append(RejectedIntent(**base, reason="unreachable", detail="goal not connected to start"))
             continue
