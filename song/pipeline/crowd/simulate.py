@@ -24,6 +24,7 @@ from song.pipeline.intents.model import Intent
 from song.pipeline.intents.navigation import Walkable
 
 ARRIVE_M = 0.05
+CHECK_EVERY = 10  # frames between line-of-sight checks (turn anticipation, off-corridor detection): 1/3 s
 CORNER_REACHED_M = 0.02  # close enough to a corner to head for the next one (the segment after it is legal)
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this in stall_time_s is stalled
 HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
@@ -133,13 +134,15 @@ def _simulate(intents: list[Intent], corridors: _Corridors, cfg: CrowdConfig, rn
             path = paths[k]
             while corner[k] < len(path) - 1 and (
                 np.linalg.norm(path[corner[k]] - pos[k]) < 0.1
-                or (frame % 5 == 0 and corridors.visible(pos[k], path[corner[k] + 1]))
+                or (frame % CHECK_EVERY == 0 and corridors.visible(pos[k], path[corner[k] + 1]))
             ):
                 corner[k] += 1
-            if frame % 5 == 0 and not corridors.visible(pos[k], path[corner[k]]):
-                fresh = corridors.corners(pos[k], goal[k])  # pushed off the corridor: a new one from here
-                if fresh is not None:
-                    paths[k], corner[k], path = fresh, 0, fresh
+            if frame % CHECK_EVERY == 0 and not corridors.visible(pos[k], path[corner[k]]):
+                # pushed off the corridor: a short detour back to the current corner, then the old corridor
+                detour = corridors.corners(pos[k], path[corner[k]])
+                if detour is not None:
+                    path = np.vstack([detour, path[corner[k] + 1 :]])
+                    paths[k], corner[k] = path, 0
             to = path[corner[k]] - pos[k]
             d = np.linalg.norm(to)
             d_goal = np.linalg.norm(goal[k] - pos[k])
