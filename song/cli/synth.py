@@ -65,12 +65,35 @@ def run_chain_command(
     return results
 
 
+def _crowd_totals(out: Path, results: list[SceneResult]) -> tuple[int, int]:
+    """Pedestrians and pedestrian-frames over the run's scenes (from the crowd files' metadata)."""
+    import pyarrow.parquet as pq
+
+    peds = frames = 0
+    for result in results:
+        path = out / "scenes" / result.scene_id / "crowd.parquet"
+        if result.status != "failed" and path.is_file():
+            meta = pq.read_metadata(path)
+            frames += meta.num_rows
+            status = json.loads((path.parent / "crowd_status.json").read_text())
+            peds += sum(v["status"] != "removed" for v in status.values())
+    return peds, frames
+
+
 def _print_summary(results: list[SceneResult], names: list[str], wall: float, out: Path, quiet: bool) -> None:
     results = sorted(results, key=lambda r: r.scene_id)
+    peds, frames = _crowd_totals(out, results)
     counts = {status: sum(r.status == status for r in results) for status in ("ok", "skipped", "failed")}
     per_stage = {name: sum(r.seconds.get(name, 0.0) for r in results) for name in names}
     if quiet:
-        summary = {"event": "summary", "scenes": counts, "stage_seconds": per_stage, "wall_seconds": round(wall, 3)}
+        summary = {
+            "event": "summary",
+            "scenes": counts,
+            "stage_seconds": per_stage,
+            "wall_seconds": round(wall, 3),
+            "pedestrians": peds,
+            "pedestrian_frames": frames,
+        }
         sys.stdout.write(json.dumps(summary, sort_keys=True) + "\n")
         return
     failed_rows = [{"scene": r.scene_id, "status": r.status, "error": r.error} for r in results if r.status == "failed"]
@@ -88,7 +111,8 @@ def _print_summary(results: list[SceneResult], names: list[str], wall: float, ou
     ]
     console.print(status_table(f"run {out}", rows, ["stage", "ok", "skipped", "failed", "cpu s"]))
     console.print(
-        f"scenes: {counts['ok']} ok, {counts['skipped']} unchanged, {counts['failed']} failed in {wall:.1f} s wall"
+        f"scenes: {counts['ok']} ok, {counts['skipped']} unchanged, {counts['failed']} failed in {wall:.1f} s wall; "
+        f"{peds} pedestrians, {frames} pedestrian-frames at 30 FPS"
     )
 
 

@@ -158,10 +158,15 @@ def _outputs_intact(scene_dir: Path, outputs: dict[str, str]) -> bool:
 
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
-    """sha256 over the package's Python sources: a code change invalidates recorded stage results."""
+    """sha256 over the sources that shape stage outputs (not the CLI, pictures or runtime).
+
+    A change there invalidates recorded stage results, so a resumed run never mixes code versions.
+    """
     root = Path(song.__file__).parent
     digest = hashlib.sha256(song.__version__.encode())
     for path in sorted(root.rglob("*.py")):
+        if path.relative_to(root).parts[0] in ("cli", "viz", "runtime"):
+            continue
         digest.update(path.relative_to(root).as_posix().encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()
