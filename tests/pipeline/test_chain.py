@@ -108,3 +108,22 @@ def test_kill_and_resume_gives_identical_bytes(make_scene, tmp_path: Path, monke
     resumed = _run(scenes, tmp_path / "killed", SongConfig(), executor="serial")
     assert sum(r.stages.get("dummy_first") == "skipped" for r in resumed.values()) >= done_before
     assert _tree(tmp_path / "clean") == _tree(tmp_path / "killed")
+
+
+def test_real_stages_identical_across_executors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """intents + crowd on two sample houses: serial, 2 processes and Dask give the same bytes."""
+    pytest.importorskip("dask.distributed")
+    monkeypatch.delenv("SONG_STAGE_PLUGINS")
+    from tests.conftest import SAMPLES
+
+    ids = ["procthor_house_1", "procthor_house_6"]
+    trees = []
+    for executor, workers in (("serial", 1), ("process", 2), ("dask", 2)):
+        run = tmp_path / executor
+        results = list(
+            iter_run(SAMPLES, run, SongConfig(seed=2), ["intents", "crowd"], workers, executor, scene_ids=ids)
+        )
+        assert {r.status for r in results} == {"ok"}
+        trees.append(_tree(run))
+    assert trees[0] == trees[1] == trees[2]
+    assert any(name.endswith("crowd.parquet") for name in trees[0])
