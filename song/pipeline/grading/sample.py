@@ -50,13 +50,17 @@ class RobotMap:
         ra, rb = self.package.occupancy.to_cell(np.stack([a, b]))
         return bool(self.labels[tuple(ra)] and self.labels[tuple(ra)] == self.labels[tuple(rb)])
 
-    def plan(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
-        """Smoothed A*-optimal path (K, 2) between two legal points, or None when unreachable."""
+    def plan(self, start: np.ndarray, goal: np.ndarray, max_length_m: float = np.inf) -> np.ndarray | None:
+        """Smoothed A*-optimal path (K, 2) between two legal points, or None when unreachable.
+
+        The search stops at ``max_length_m`` (paths longer than that are not wanted), which keeps
+        queries cheap in large scenes; within the bound the result is exact.
+        """
         grid = self.package.occupancy
         a, b = (tuple(int(v) for v in grid.to_cell(p)) for p in (start, goal))
         if self.graph.index[a] < 0 or self.graph.index[b] < 0:
             return None
-        dist, pred = distances_from(self.graph, a, with_path=True)
+        dist, pred = distances_from(self.graph, a, with_path=True, limit=max_length_m / grid.resolution + 1.0)
         cells = path_cells(self.graph, dist, pred, b)
         if cells is None:
             return None
@@ -149,9 +153,10 @@ class EpisodeSampler:
             if straight > cfg.max_path_m or not self.robot.connected(start, goal):
                 reason = "goal unreachable or farther than the longest allowed path"
                 continue
-            path = self.robot.plan(start, goal)
+            # the grid path is at least as long as the smoothed one: bound the search a little beyond the cap
+            path = self.robot.plan(start, goal, max_length_m=1.5 * cfg.max_path_m)
             if path is None:
-                reason = "goal unreachable from start"
+                reason = "goal unreachable from start within the path-length bound"
                 continue
             length = polyline_length(path)
             if not cfg.min_path_m <= length <= cfg.max_path_m:
