@@ -21,12 +21,9 @@ class Pose:
 
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap to (−π, π]."""
-    return (
-        -((-np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi)
-        if np.ndim(angle)
-        else float(-((-angle + np.pi) % (2 * np.pi) - np.pi))
-    )
+    """Wrap to [−π, π); a float stays a float."""
+    wrapped = (np.asarray(angle, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
+    return float(wrapped) if np.ndim(angle) == 0 else wrapped
 
 
 def clamp_command(v: float, omega: float, max_speed: float, max_yaw_rate: float) -> tuple[float, float]:
