@@ -47,20 +47,13 @@ class StaticWorld:
         """
         directions = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
         dist = np.zeros(len(angles))
-        active = np.ones(len(angles), dtype=bool)
         min_step = 0.25 * self.map.resolution
         for _ in range(4 * int(max_range / self.map.resolution) + 8):
-            if not active.any():
+            clear = self.clearance_at(origin + directions * dist[:, None])
+            done = (clear <= 0.0) | (dist >= max_range)
+            if done.all():
                 break
-            points = origin + directions[active] * dist[active, None]
-            clear = self.clearance_at(points)
-            hit = clear <= 0.0
-            step = np.maximum(clear, min_step)
-            idx = np.flatnonzero(active)
-            dist[idx[~hit]] += step[~hit]
-            active[idx[hit]] = False
-            over = dist >= max_range
-            active &= ~over
+            dist = np.where(done, dist, dist + np.maximum(clear, min_step))  # every ray at once
         return np.minimum(dist, max_range)
 
 

@@ -105,3 +105,15 @@ def test_load_policy() -> None:
     with pytest.raises(Exception, match="unknown policy"):
         load_policy("nope")
     assert room_map().cells.dtype == np.uint8
+
+
+def test_range_cast_hits_walls_and_people() -> None:
+    from song.runtime.world import cast_circles
+
+    world = StaticWorld(room_map(walls=[(7.0, 0.0, 7.2, 6.0)]))
+    angles = np.array([0.0, np.pi / 2, np.pi, -np.pi / 2])
+    ranges = world.cast(np.array([5.0, 3.0]), angles, 5.0)
+    # walls: x = 7.0 (east), y = 5.9 (north border), x = 0.1 (west, beyond 5 m), y = 0.1 (south)
+    np.testing.assert_allclose(ranges, [2.0, 2.9, 4.9, 2.9], atol=0.05)
+    people = cast_circles(np.array([5.0, 3.0]), angles, np.array([[6.0, 3.0]]), 0.25, 5.0)
+    np.testing.assert_allclose(people, [0.75, 5.0, 5.0, 5.0], atol=1e-9)
