@@ -8,8 +8,16 @@ min/max of position and of log-scale, or 18 with min/max colour too) and a ``ver
 uint32 words per splat: position and log-scale packed 11-10-11 bits as fractions of the chunk's
 range, the rotation as "smallest three" (2 bits: index of the largest of rot_0..rot_3, then the other
 three in order, 10 bits each, in [−1/√2, 1/√2]), and colour+opacity 8-8-8-8 (colour = 0.5 + C0·f_dc,
-opacity = sigmoid(logit)). An optional ``sh`` element holds f_rest as uint8: f = (v/255 − 0.5)·8.
-``plyfile`` reads and writes the container; the bit packing is ours, vectorised.
+opacity = sigmoid(logit)). An optional ``sh`` element holds f_rest as uint8 (9, 24 or 45 of them):
+encoded trunc((f/8 + 0.5)·256), decoded f = (n − 0.5)·8 with n = (v + 0.5)/256 (0 → 0, 255 → 1).
+Quantisation follows SuperSplat/splat-transform: a fraction t of a chunk range becomes
+floor(t·(2^bits − 1) + 0.5); a range narrower than 1e-5 stores 0; log-scale ranges are clamped to
+[−20, 20]; the last chunk's ranges include copies of its last splat (padding to 256).
+
+Order: :func:`write_compressed_ply` keeps the cloud's order by default, so splat ``i`` read back is
+splat ``i`` written (callers sort spatially for tight chunks); ``morton=True`` sorts as SuperSplat
+does (10-bit Morton code over the bounding box, buckets of more than 256 equal codes re-sorted within
+their own box). ``plyfile`` reads and writes the container; the bit packing is ours, vectorised.
 """
 
 from __future__ import annotations
@@ -30,6 +38,10 @@ CHUNK_SCALE = ("min_scale_x", "min_scale_y", "min_scale_z", "max_scale_x", "max_
 CHUNK_COLOR = ("min_r", "min_g", "min_b", "max_r", "max_g", "max_b")
 PACKED = ("packed_position", "packed_rotation", "packed_scale", "packed_color")
 SQRT1_2 = float(np.sqrt(0.5))
+SCALE_LIMIT = 20.0  # SuperSplat clamps log-scale chunk ranges (some files hold ±inf)
+MIN_SPAN = 1e-5  # a chunk range narrower than this stores fraction 0
+SH_COUNTS = (9, 24, 45)  # f_rest values per splat for SH degree 1, 2, 3
+OPACITY_EPS = 1e-6  # opacity byte 0/255 decodes to [eps, 1 − eps] so the logit stays finite
 
 
 @dataclass
@@ -62,13 +74,14 @@ def _open(path: Path):
     if not path.is_file():
         raise FormatError(path, "", "file is missing")
     try:
-        return PlyData.read(str(path))
+        return PlyData.read(str(path))  # memory-mapped: the header is parsed and the body size checked
     except PlyElementParseError as exc:
-        raise FormatError(
-            path, exc.element.name if exc.element else "body", f"truncated or malformed data ({exc.message})"
-        ) from exc
+        where = exc.element.name if exc.element else "body"
+        if exc.prop is not None:
+            where += f".{exc.prop.name}"
+        raise FormatError(path, where, f"truncated or malformed data ({exc.message})") from exc
     except (PlyHeaderParseError, ValueError, OSError, EOFError, IndexError) as exc:
-        raise FormatError(path, "header", f"not a readable PLY ({exc})") from exc
+        raise FormatError(path, "header", f"not a readable PLY ({' '.join(str(exc).split())})") from exc
 
 
 def _column(element, name: str, path: Path) -> np.ndarray:
@@ -78,17 +91,72 @@ def _column(element, name: str, path: Path) -> np.ndarray:
         raise FormatError(path, f"{element.name}.{name}", "property is missing") from exc
 
 
-def read_gaussian_ply(path: str | Path) -> GaussianCloud:
-    """Read either PLY form (compressed when a ``chunk`` element with packed vertices is present)."""
-    path = Path(path)
-    ply = _open(path)
+def _require(element, names: tuple[str, ...], kinds: str, path: Path) -> None:
+    """Each of ``names`` is a scalar property of ``element`` whose numpy kind/size is in ``kinds``."""
+    props = {p.name: p for p in element.properties}
+    for name in names:
+        prop = props.get(name)
+        if prop is None:
+            raise FormatError(path, f"{element.name}.{name}", "property is missing")
+        dtype = np.dtype(getattr(prop, "val_dtype", "O"))
+        if f"{dtype.kind}{dtype.itemsize}" not in kinds.split():
+            raise FormatError(path, f"{element.name}.{name}", f"has type {dtype}, expected {kinds.split()[0]}")
+
+
+STANDARD_REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity") + tuple(
+    f"{p}_{i}" for p, k in (("scale", 3), ("rot", 4)) for i in range(k)
+)
+
+
+def _check(ply, path: Path) -> bool:
+    """Validate the element/property schema; True when the file is the compressed form."""
     names = [element.name for element in ply.elements]
     if "vertex" not in names:
         raise FormatError(path, "vertex", "element is missing")
+    vertex = ply["vertex"]
+    if "chunk" not in names:
+        _require(vertex, STANDARD_REQUIRED, "f4 f8 f2", path)
+        return False
+    chunk = ply["chunk"]
+    has_colour = "min_r" in {p.name for p in chunk.properties}
+    _require(chunk, CHUNK_POS + CHUNK_SCALE + (CHUNK_COLOR if has_colour else ()), "f4", path)
+    _require(vertex, PACKED, "u4", path)
+    n = vertex.count
+    if chunk.count != (n + CHUNK - 1) // CHUNK:
+        raise FormatError(path, "chunk", f"{chunk.count} chunks cannot hold {n} splats (256 per chunk)")
+    if "sh" in names:
+        sh = ply["sh"]
+        if len(sh.properties) not in SH_COUNTS:
+            raise FormatError(path, "sh", f"{len(sh.properties)} properties, expected one of {SH_COUNTS}")
+        _require(sh, tuple(f"f_rest_{i}" for i in range(len(sh.properties))), "u1", path)
+        if sh.count != n:
+            raise FormatError(path, "sh", f"{sh.count} rows for {n} splats")
+    return True
+
+
+def check_gaussian_ply(path: str | Path) -> int:
+    """Cheap structural check (header, schema, body size) without decoding; returns the splat count.
+
+    Raises:
+        FormatError: naming the file and the element/property at fault.
+    """
+    path = Path(path)
+    ply = _open(path)
+    _check(ply, path)
+    return int(ply["vertex"].count)
+
+
+def read_gaussian_ply(path: str | Path) -> GaussianCloud:
+    """Read either PLY form (compressed when a ``chunk`` element with packed vertices is present).
+
+    Raises:
+        FormatError: missing, truncated or malformed file, naming the element/property at fault.
+    """
+    path = Path(path)
+    ply = _open(path)
+    compressed = _check(ply, path)
     try:
-        if "chunk" in names:
-            return _read_compressed(ply, path)
-        return _read_standard(ply["vertex"], path)
+        return _read_compressed(ply, path) if compressed else _read_standard(ply["vertex"], path)
     except (ValueError, IndexError) as exc:  # truncated bodies surface here in plyfile's lazy reads
         raise FormatError(path, "vertex", f"truncated or malformed data ({exc})") from exc
 
@@ -100,6 +168,8 @@ def _read_standard(vertex, path: Path) -> GaussianCloud:
     )
     rest = None
     if rest_names:
+        if len(rest_names) % 3:
+            raise FormatError(path, "vertex.f_rest_*", f"{len(rest_names)} values is not a multiple of 3")
         flat = np.stack([col(n) for n in rest_names], axis=1)
         rest = flat.reshape(len(flat), 3, -1).transpose(0, 2, 1).copy()  # 3DGS stores channel-major
     return GaussianCloud(
@@ -120,39 +190,38 @@ def _unpack_111011(value: np.ndarray) -> np.ndarray:
     return np.stack([_unorm(value, 21, 11), _unorm(value, 11, 10), _unorm(value, 0, 11)], axis=1)
 
 
+def _ranges(chunk, names: tuple[str, ...], index: np.ndarray, path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Per-splat (lo, hi) of a 6-name min/max chunk group, (N, 3) float64 each."""
+    cols = [_column(chunk, name, path).astype(np.float64)[index] for name in names]
+    return np.stack(cols[:3], axis=1), np.stack(cols[3:], axis=1)
+
+
+def _lerp(lo: np.ndarray, hi: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return lo * (1 - t) + hi * t  # exact at both ends
+
+
 def _read_compressed(ply, path: Path) -> GaussianCloud:
     chunk, vertex = ply["chunk"], ply["vertex"]
     n = vertex.count
-    if chunk.count != (n + CHUNK - 1) // CHUNK:
-        raise FormatError(path, "chunk", f"{chunk.count} chunks cannot hold {n} splats (256 per chunk)")
     packed = {name: _column(vertex, name, path).astype(np.uint32) for name in PACKED}
     index = np.arange(n) // CHUNK
-    c = {name: _column(chunk, name, path).astype(np.float64)[index] for name in CHUNK_POS + CHUNK_SCALE}
-    lo = np.stack([c[k] for k in CHUNK_POS[:3]], axis=1)
-    hi = np.stack([c[k] for k in CHUNK_POS[3:]], axis=1)
-    means = lo + (hi - lo) * _unpack_111011(packed["packed_position"])
-    slo = np.stack([c[k] for k in CHUNK_SCALE[:3]], axis=1)
-    shi = np.stack([c[k] for k in CHUNK_SCALE[3:]], axis=1)
-    log_scales = slo + (shi - slo) * _unpack_111011(packed["packed_scale"])
+    means = _lerp(*_ranges(chunk, CHUNK_POS, index, path), _unpack_111011(packed["packed_position"]))
+    log_scales = _lerp(*_ranges(chunk, CHUNK_SCALE, index, path), _unpack_111011(packed["packed_scale"]))
     word = packed["packed_color"]
     rgba = np.stack([_unorm(word, s, 8) for s in (24, 16, 8, 0)], axis=1)
     colour = rgba[:, :3]
-    if set(CHUNK_COLOR) <= {prop.name for prop in chunk.properties}:  # the 18-property chunk variant
-        clo = np.stack([_column(chunk, k, path)[index] for k in CHUNK_COLOR[:3]], axis=1)
-        chi = np.stack([_column(chunk, k, path)[index] for k in CHUNK_COLOR[3:]], axis=1)
-        colour = clo + (chi - clo) * colour
-    alpha = np.clip(rgba[:, 3], 1e-6, 1 - 1e-6)  # byte 255 → 1.0 would be an infinite logit
-    quats = _unpack_rotation(packed["packed_rotation"])
+    if "min_r" in {prop.name for prop in chunk.properties}:  # the 18-property chunk variant
+        colour = _lerp(*_ranges(chunk, CHUNK_COLOR, index, path), colour)
+    alpha = np.clip(rgba[:, 3], OPACITY_EPS, 1 - OPACITY_EPS)  # byte 255 → 1.0 would be an infinite logit
     rest = None
     if "sh" in [e.name for e in ply.elements]:
         sh = ply["sh"]
-        names = sorted((p.name for p in sh.properties), key=lambda s: int(s.split("_")[-1]))
-        flat = np.stack([np.asarray(sh[k], dtype=np.float64) for k in names], axis=1)
-        flat = (flat / 255.0 - 0.5) * 8.0
-        rest = flat.reshape(n, 3, -1).transpose(0, 2, 1).astype(np.float32)
+        v = np.stack([np.asarray(sh[f"f_rest_{i}"], dtype=np.float64) for i in range(len(sh.properties))], axis=1)
+        unit = np.where(v == 0, 0.0, np.where(v == 255, 1.0, (v + 0.5) / 256))
+        rest = ((unit - 0.5) * 8.0).reshape(n, 3, -1).transpose(0, 2, 1).astype(np.float32)
     return GaussianCloud(
         means=means.astype(np.float32),
-        quats=quats.astype(np.float32),
+        quats=_unpack_rotation(packed["packed_rotation"]).astype(np.float32),
         log_scales=log_scales.astype(np.float32),
         opacity_logits=np.log(alpha / (1 - alpha)).astype(np.float32),
         sh_dc=((colour - 0.5) / SH_C0).astype(np.float32),
@@ -161,49 +230,95 @@ def _read_compressed(ply, path: Path) -> GaussianCloud:
 
 
 def _unpack_rotation(word: np.ndarray) -> np.ndarray:
-    norm = 1.0 / (np.sqrt(2.0) * 0.5)
     abc = np.stack([_unorm(word, 20, 10), _unorm(word, 10, 10), _unorm(word, 0, 10)], axis=1)
-    abc = (abc - 0.5) * norm
+    abc = (abc - 0.5) / SQRT1_2
     largest = (word >> np.uint32(30)).astype(np.int64)
     m = np.sqrt(np.clip(1.0 - (abc**2).sum(axis=1), 0.0, None))
     out = np.empty((len(word), 4))
     for k in range(4):
         rows = largest == k
-        others = [i for i in range(4) if i != k]
-        out[np.ix_(rows, others)] = abc[rows]
+        out[np.ix_(rows, [i for i in range(4) if i != k])] = abc[rows]
         out[rows, k] = m[rows]
     return out
 
 
+def _pack_unorm(t: np.ndarray, bits: int) -> np.ndarray:
+    top = (1 << bits) - 1
+    return np.clip(np.floor(t * top + 0.5), 0, top).astype(np.uint32)
+
+
 def _pack_rotation(quats: np.ndarray) -> np.ndarray:
     q = quats / np.linalg.norm(quats, axis=1, keepdims=True)
-    largest = np.argmax(np.abs(q), axis=1)
+    largest = np.argmax(np.abs(q), axis=1)  # first of equal magnitudes, as SuperSplat
     q = q * np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)[:, None]  # q ≡ −q: make it positive
     word = largest.astype(np.uint32) << np.uint32(30)
     for k in range(4):
         rows = largest == k
-        others = q[rows][:, [i for i in range(4) if i != k]]
-        t = np.clip(np.round((others * SQRT1_2 + 0.5) * 1023), 0, 1023).astype(np.uint32)
+        t = _pack_unorm(q[rows][:, [i for i in range(4) if i != k]] * SQRT1_2 + 0.5, 10)
         word[rows] |= (t[:, 0] << np.uint32(20)) | (t[:, 1] << np.uint32(10)) | t[:, 2]
     return word
 
 
 def _pack_111011(t: np.ndarray) -> np.ndarray:
-    x = np.clip(np.round(t[:, 0] * 2047), 0, 2047).astype(np.uint32)
-    y = np.clip(np.round(t[:, 1] * 1023), 0, 1023).astype(np.uint32)
-    z = np.clip(np.round(t[:, 2] * 2047), 0, 2047).astype(np.uint32)
-    return (x << np.uint32(21)) | (y << np.uint32(11)) | z
+    return (
+        (_pack_unorm(t[:, 0], 11) << np.uint32(21))
+        | (_pack_unorm(t[:, 1], 10) << np.uint32(11))
+        | _pack_unorm(t[:, 2], 11)
+    )
 
 
 def _chunk_ranges(values: np.ndarray, n_chunks: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n_chunks, D) min and max; the last chunk is padded with copies of the last row."""
     pad = n_chunks * CHUNK - len(values)
     padded = np.concatenate([values, np.repeat(values[-1:], pad, axis=0)]).reshape(n_chunks, CHUNK, -1)
     return padded.min(axis=1), padded.max(axis=1)
 
 
 def _fraction(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    span = np.where(hi - lo > 0, hi - lo, 1.0)
-    return (values - lo) / span
+    """SuperSplat's normalise: 0 at or below lo, 1 at or above hi, 0 for a range under 1e-5."""
+    span = hi - lo
+    t = (values - lo) / np.where(span < MIN_SPAN, 1.0, span)
+    t = np.where(span < MIN_SPAN, 0.0, t)
+    return np.where(values <= lo, 0.0, np.where(values >= hi, 1.0, t))
+
+
+def morton_order(means: np.ndarray) -> np.ndarray:
+    """Indices that sort ``means`` (N, 3) by 30-bit Morton code, as SuperSplat orders splats.
+
+    Each axis of the bounding box is cut into 1024 cells (x in the lowest bit); runs of more than 256
+    equal codes are re-sorted within their own bounding box. Stable, so the result is deterministic.
+    """
+    result = np.arange(len(means))
+    stack = [(0, len(means))]
+    while stack:
+        start, end = stack.pop()
+        idx = result[start:end]
+        p = means[idx].astype(np.float64)
+        lo, size = p.min(axis=0), np.ptp(p, axis=0)
+        if not np.isfinite(size).all() or not size.any():
+            continue
+        cells = np.minimum(1023, (p - lo) * np.where(size > 0, 1024 / np.where(size > 0, size, 1), 0)).astype(np.uint32)
+        code = (
+            _part1by2(cells[:, 0]) | (_part1by2(cells[:, 1]) << np.uint32(1)) | (_part1by2(cells[:, 2]) << np.uint32(2))
+        )
+        sort = np.argsort(code, kind="stable")
+        result[start:end] = idx[sort]
+        code = code[sort]
+        bounds = np.flatnonzero(np.diff(code)) + 1
+        edges = np.concatenate([[0], bounds, [len(code)]])
+        for a, b in zip(edges[:-1], edges[1:], strict=True):
+            if b - a > CHUNK:
+                stack.append((start + int(a), start + int(b)))
+    return result
+
+
+def _part1by2(x: np.ndarray) -> np.ndarray:
+    """Spread the low 10 bits of ``x`` (uint32) two zero bits apart."""
+    x = x & np.uint32(0x3FF)
+    x = (x ^ (x << np.uint32(16))) & np.uint32(0xFF0000FF)
+    x = (x ^ (x << np.uint32(8))) & np.uint32(0x0300F00F)
+    x = (x ^ (x << np.uint32(4))) & np.uint32(0x030C30C3)
+    return (x ^ (x << np.uint32(2))) & np.uint32(0x09249249)
 
 
 def _ply_bytes(elements: list) -> bytes:
@@ -233,53 +348,57 @@ def write_standard_ply(path: str | Path, cloud: GaussianCloud) -> None:
     write_bytes_atomic(path, _ply_bytes([PlyElement.describe(data, "vertex")]))
 
 
-def write_compressed_ply(path: str | Path, cloud: GaussianCloud) -> None:
-    """Write the SuperSplat compressed PLY (18-property chunks, plus ``sh`` when present).
+def write_compressed_ply(path: str | Path, cloud: GaussianCloud, *, morton: bool = False) -> None:
+    """Write the SuperSplat compressed PLY (18-property chunks, plus ``sh`` when present), atomically.
 
-    Splats are written in the given order (callers sort spatially, e.g. by Morton code, for tight
-    chunks); the bytes depend only on the cloud.
+    Args:
+        path: output file.
+        cloud: N ≥ 1 Gaussians; ``sh_rest`` with 3, 8 or 15 coefficients if present.
+        morton: sort splats in SuperSplat's Morton order first; by default the cloud's own order is
+            kept (callers sort spatially for tight chunks) so splat i read back is splat i written.
+
+    The bytes depend only on the cloud (and ``morton``).
     """
     from plyfile import PlyElement
 
     n = len(cloud)
     if n == 0:
         raise ValueError("cannot write an empty Gaussian cloud")
+    if cloud.sh_rest is not None and cloud.sh_rest.shape[1] * 3 not in SH_COUNTS:
+        raise ValueError(f"sh_rest has {cloud.sh_rest.shape[1]} coefficients; compressed PLY holds 3, 8 or 15")
+    if morton:
+        cloud = GaussianCloud(*(None if a is None else a[morton_order(cloud.means)] for a in vars(cloud).values()))
     n_chunks = (n + CHUNK - 1) // CHUNK
     index = np.arange(n) // CHUNK
-    means = cloud.means.astype(np.float64)
-    scales = cloud.log_scales.astype(np.float64)
-    colour = 0.5 + SH_C0 * cloud.sh_dc.astype(np.float64)
-    plo, phi = _chunk_ranges(means, n_chunks)
-    slo, shi = _chunk_ranges(scales, n_chunks)
-    clo, chi = _chunk_ranges(colour, n_chunks)
+    groups = {
+        CHUNK_POS: cloud.means.astype(np.float64),
+        CHUNK_SCALE: cloud.log_scales.astype(np.float64),
+        CHUNK_COLOR: 0.5 + SH_C0 * cloud.sh_dc.astype(np.float64),
+    }
     chunk = np.empty(n_chunks, dtype=[(name, "<f4") for name in CHUNK_POS + CHUNK_SCALE + CHUNK_COLOR])
-    for k, name in enumerate(CHUNK_POS):
-        chunk[name] = (plo if k < 3 else phi)[:, k % 3]
-    for k, name in enumerate(CHUNK_SCALE):
-        chunk[name] = (slo if k < 3 else shi)[:, k % 3]
-    for k, name in enumerate(CHUNK_COLOR):
-        chunk[name] = (clo if k < 3 else chi)[:, k % 3]
-    # quantise against the float32 ranges actually stored, so decoding sees the same bounds
-    as_stored = lambda a, b: (chunk[a].astype(np.float64)[index], chunk[b].astype(np.float64)[index])  # noqa: E731
-    lo_p = np.stack([as_stored(CHUNK_POS[i], CHUNK_POS[i + 3])[0] for i in range(3)], axis=1)
-    hi_p = np.stack([as_stored(CHUNK_POS[i], CHUNK_POS[i + 3])[1] for i in range(3)], axis=1)
-    lo_s = np.stack([as_stored(CHUNK_SCALE[i], CHUNK_SCALE[i + 3])[0] for i in range(3)], axis=1)
-    hi_s = np.stack([as_stored(CHUNK_SCALE[i], CHUNK_SCALE[i + 3])[1] for i in range(3)], axis=1)
-    lo_c = np.stack([as_stored(CHUNK_COLOR[i], CHUNK_COLOR[i + 3])[0] for i in range(3)], axis=1)
-    hi_c = np.stack([as_stored(CHUNK_COLOR[i], CHUNK_COLOR[i + 3])[1] for i in range(3)], axis=1)
+    fractions = {}
+    for names, values in groups.items():
+        lo, hi = _chunk_ranges(values, n_chunks)
+        if names is CHUNK_SCALE:
+            lo, hi = np.clip(lo, -SCALE_LIMIT, SCALE_LIMIT), np.clip(hi, -SCALE_LIMIT, SCALE_LIMIT)
+        for k in range(3):
+            chunk[names[k]], chunk[names[k + 3]] = lo[:, k], hi[:, k]
+        # quantise against the float32 ranges actually stored, so decoding sees the same bounds
+        lo32 = np.stack([chunk[names[k]] for k in range(3)], axis=1).astype(np.float64)[index]
+        hi32 = np.stack([chunk[names[k + 3]] for k in range(3)], axis=1).astype(np.float64)[index]
+        fractions[names] = _fraction(values, lo32, hi32)
     opacity = 1.0 / (1.0 + np.exp(-cloud.opacity_logits.astype(np.float64)))
-    rgba = np.column_stack([np.clip(_fraction(colour, lo_c, hi_c), 0, 1), opacity])
-    bytes_ = np.clip(np.round(rgba * 255), 0, 255).astype(np.uint32)
+    rgba = [_pack_unorm(fractions[CHUNK_COLOR][:, k], 8) for k in range(3)] + [_pack_unorm(opacity, 8)]
     vertex = np.empty(n, dtype=[(name, "<u4") for name in PACKED])
-    vertex["packed_position"] = _pack_111011(np.clip(_fraction(means, lo_p, hi_p), 0, 1))
+    vertex["packed_position"] = _pack_111011(fractions[CHUNK_POS])
     vertex["packed_rotation"] = _pack_rotation(cloud.quats.astype(np.float64))
-    vertex["packed_scale"] = _pack_111011(np.clip(_fraction(scales, lo_s, hi_s), 0, 1))
-    vertex["packed_color"] = (bytes_[:, 0] << 24) | (bytes_[:, 1] << 16) | (bytes_[:, 2] << 8) | bytes_[:, 3]
+    vertex["packed_scale"] = _pack_111011(fractions[CHUNK_SCALE])
+    vertex["packed_color"] = (rgba[0] << 24) | (rgba[1] << 16) | (rgba[2] << 8) | rgba[3]
     elements = [PlyElement.describe(chunk, "chunk"), PlyElement.describe(vertex, "vertex")]
     if cloud.sh_rest is not None:
-        flat = cloud.sh_rest.transpose(0, 2, 1).reshape(n, -1).astype(np.float64)
+        flat = cloud.sh_rest.transpose(0, 2, 1).reshape(n, -1).astype(np.float64)  # channel-major
+        q = np.clip(np.trunc((flat / 8.0 + 0.5) * 256), 0, 255).astype(np.uint8)
         sh = np.empty(n, dtype=[(f"f_rest_{i}", "u1") for i in range(flat.shape[1])])
-        q = np.clip(np.round((flat / 8.0 + 0.5) * 255), 0, 255).astype(np.uint8)
         for i in range(flat.shape[1]):
             sh[f"f_rest_{i}"] = q[:, i]
         elements.append(PlyElement.describe(sh, "sh"))
