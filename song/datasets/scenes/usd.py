@@ -65,7 +65,7 @@ def _pxr():
     try:
         from pxr import Sdf, Usd, UsdGeom, Vt
     except ImportError as exc:
-        raise MissingDependencyError("pxr (usd-core)", "usd") from exc
+        raise MissingDependencyError("pxr", "usd") from exc
     return Sdf, Usd, UsdGeom, Vt
 
 
@@ -81,8 +81,26 @@ def _identifier(name: str, used: set[str]) -> str:
     return candidate
 
 
+def _check_box(index: int, box: ProxyBox) -> np.ndarray:
+    fp = np.asarray(box.footprint, dtype=np.float64)
+    if fp.shape != (4, 2) or not np.isfinite(fp).all() or not np.isfinite([box.z_min, box.z_max]).all():
+        raise ValueError(f"boxes[{index}] '{box.name}': footprint must be (4, 2) finite metres, heights finite")
+    if box.z_max <= box.z_min:
+        raise ValueError(f"boxes[{index}] '{box.name}': z_max {box.z_max} must exceed z_min {box.z_min}")
+    return fp
+
+
 def write_usd_proxy(path: str | Path, boxes: list[ProxyBox]) -> None:
-    """Write ``scene_flat.usda`` (metersPerUnit 1, upAxis Z) with one mesh per box, atomically."""
+    """Write ``scene_flat.usda`` (metersPerUnit 1, upAxis Z) with one mesh per box, atomically.
+
+    The text is exported from an in-memory stage and written with an atomic rename; it depends only
+    on ``boxes`` (names, footprints, heights; float32 points), so the same boxes give the same bytes.
+    Prim names are USD identifiers derived from the box names, made unique with ``_2``, ``_3`` ...
+
+    Raises:
+        MissingDependencyError: usd-core is not installed.
+        ValueError: a box is not a (4, 2) finite footprint with z_max > z_min.
+    """
     Sdf, Usd, UsdGeom, Vt = _pxr()
     stage = Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
@@ -91,45 +109,73 @@ def write_usd_proxy(path: str | Path, boxes: list[ProxyBox]) -> None:
     stage.SetDefaultPrim(world.GetPrim())
     UsdGeom.Scope.Define(stage, "/World/collision")
     used: set[str] = set()
-    for box in boxes:
-        fp = np.asarray(box.footprint, dtype=np.float64)
+    for index, box in enumerate(boxes):
+        fp = _check_box(index, box)
         points = np.vstack([np.column_stack([fp, np.full(4, box.z_min)]), np.column_stack([fp, np.full(4, box.z_max)])])
         mesh = UsdGeom.Mesh.Define(stage, f"/World/collision/{_identifier(box.name, used)}")
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points.astype(np.float32)))
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(PRISM_FACES)))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(PRISM_FACES.ravel().tolist()))
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        lo, hi = points.min(axis=0).astype(np.float32), points.max(axis=0).astype(np.float32)
+        mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi])))
     text = stage.GetRootLayer().ExportToString()
     text = re.sub(r'\n    doc = "[^"]*"\n', "\n", text)  # no tool banner: bytes depend on the boxes only
     write_text_atomic(path, text)
 
 
 def read_usd_proxy(path: str | Path) -> list[ProxyMesh]:
-    """The meshes under ``/World/collision`` (triangulated fans for non-triangle faces)."""
+    """The meshes under ``/World/collision``, faces fan-triangulated.
+
+    Returns:
+        One :class:`ProxyMesh` per ``UsdGeom.Mesh`` child, in prim order: vertices (V, 3) float64
+        metres (Z up), faces (F, 3) int64 indices into vertices.
+
+    Raises:
+        MissingDependencyError: usd-core is not installed.
+        FormatError: missing or unreadable file, wrong stage metadata, or a malformed mesh, naming
+            the prim and attribute.
+    """
     Sdf, Usd, UsdGeom, Vt = _pxr()
+    from pxr import Tf
+
     path = Path(path)
     if not path.is_file():
         raise FormatError(path, "", "file is missing")
-    stage = Usd.Stage.Open(str(path))
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        reason = " ".join(str(exc).split()).split("' : ")[-1][:160]
+        raise FormatError(path, "", f"not a readable USD layer ({reason})") from exc
     if stage is None:
         raise FormatError(path, "", "not a readable USD stage")
-    if UsdGeom.GetStageUpAxis(stage) != UsdGeom.Tokens.z or UsdGeom.GetStageMetersPerUnit(stage) != 1.0:
-        raise FormatError(path, "upAxis", "expected upAxis Z and metersPerUnit 1")
+    if UsdGeom.GetStageUpAxis(stage) != UsdGeom.Tokens.z:
+        raise FormatError(path, "upAxis", f"is '{UsdGeom.GetStageUpAxis(stage)}', expected 'Z'")
+    if UsdGeom.GetStageMetersPerUnit(stage) != 1.0:
+        raise FormatError(path, "metersPerUnit", f"is {UsdGeom.GetStageMetersPerUnit(stage)}, expected 1")
     root = stage.GetPrimAtPath("/World/collision")
     if not root.IsValid():
         raise FormatError(path, "/World/collision", "prim is missing")
-    meshes = []
-    for prim in root.GetChildren():
-        mesh = UsdGeom.Mesh(prim)
-        if not mesh:
-            continue
-        points = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float64)
-        counts = list(mesh.GetFaceVertexCountsAttr().Get())
-        indices = list(mesh.GetFaceVertexIndicesAttr().Get())
-        faces, cursor = [], 0
-        for count in counts:
-            poly = indices[cursor : cursor + count]
-            faces += [[poly[0], poly[i], poly[i + 1]] for i in range(1, count - 1)]
-            cursor += count
-        meshes.append(ProxyMesh(prim.GetName(), points, np.asarray(faces, dtype=np.int64)))
-    return meshes
+    return [_read_mesh(path, prim, UsdGeom.Mesh(prim)) for prim in root.GetChildren() if prim.IsA(UsdGeom.Mesh)]
+
+
+def _read_mesh(path: Path, prim, mesh) -> ProxyMesh:
+    where = str(prim.GetPath())
+    points = np.asarray(mesh.GetPointsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    if len(points) == 0 or not np.isfinite(points).all():
+        raise FormatError(path, f"{where}.points", "must be a non-empty list of finite points")
+    if (counts < 3).any() or counts.sum() != len(indices):
+        raise FormatError(
+            path, f"{where}.faceVertexCounts", f"sum {counts.sum()} ≠ {len(indices)} indices or a face < 3"
+        )
+    if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):
+        raise FormatError(path, f"{where}.faceVertexIndices", f"index out of range for {len(points)} points")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    faces = [
+        np.column_stack([np.full(c - 2, indices[s]), indices[s + 1 : s + c - 1], indices[s + 2 : s + c]])
+        for s, c in zip(starts, counts, strict=True)
+    ]
+    tri = np.concatenate(faces) if faces else np.zeros((0, 3), dtype=np.int64)
+    return ProxyMesh(prim.GetName(), points, tri.astype(np.int64))

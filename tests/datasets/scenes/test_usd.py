@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 import trimesh
 
 from song.datasets.scenes.usd import ProxyBox, read_usd_proxy, write_usd_proxy
-from song.errors import FormatError
+from song.errors import FormatError, MissingDependencyError
 
 pytest.importorskip("pxr")
 
@@ -42,3 +43,74 @@ def test_bad_proxy_is_named(tmp_path: Path) -> None:
         read_usd_proxy(bad)
     with pytest.raises(FormatError, match="missing"):
         read_usd_proxy(tmp_path / "none.usda")
+
+
+def _usda(body: str, up: str = "Z", mpu: str = "1") -> str:
+    return (
+        f'#usda 1.0\n(\n    metersPerUnit = {mpu}\n    upAxis = "{up}"\n)\n\n'
+        f'def Xform "World"\n{{\n    def Scope "collision"\n    {{\n{body}\n    }}\n}}\n'
+    )
+
+
+QUAD = """        def Mesh "slab"
+        {
+            int[] faceVertexCounts = [4, 3]
+            int[] faceVertexIndices = [0, 1, 2, 3, 0, 2, 4]
+            point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0.5, 0.5, 1)]
+        }
+        def Xform "not_a_mesh"
+        {
+        }"""
+
+
+def test_reader_triangulates_other_tools_meshes(tmp_path: Path) -> None:
+    path = tmp_path / "scene_flat.usda"
+    path.write_text(_usda(QUAD))
+    (mesh,) = read_usd_proxy(path)  # the Xform child is skipped
+    assert mesh.name == "slab" and mesh.vertices.shape == (5, 3) and mesh.vertices.dtype == np.float64
+    np.testing.assert_array_equal(mesh.faces, [[0, 1, 2], [0, 2, 3], [0, 2, 4]])
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "what"),
+    [
+        ("garbage {{{", "", "not a readable USD layer"),
+        (_usda(QUAD, up="Y"), "upAxis", "expected 'Z'"),
+        (_usda(QUAD, mpu="0.01"), "metersPerUnit", "expected 1"),
+        (
+            '#usda 1.0\n(\n    upAxis = "Z"\n    metersPerUnit = 1\n)\ndef Xform "World"\n{\n}\n',
+            "/World/collision",
+            "missing",
+        ),
+        (_usda(QUAD.replace("[0, 1, 2, 3, 0, 2, 4]", "[0, 1, 2, 3, 0, 2, 9]")), "slab.faceVertexIndices", "range"),
+        (_usda(QUAD.replace("[4, 3]", "[4, 4]")), "slab.faceVertexCounts", "indices"),
+    ],
+    ids=["garbage", "y_up", "centimetres", "no_collision", "bad_index", "bad_counts"],
+)
+def test_bad_proxy_names_file_and_field(tmp_path: Path, text: str, field: str, what: str) -> None:
+    path = tmp_path / "scene_flat.usda"
+    path.write_text(text)
+    with pytest.raises(FormatError) as info:
+        read_usd_proxy(path)
+    message = str(info.value)
+    assert str(path) in message and field in message and what in message and "\n" not in message, message
+
+
+def test_writer_rejects_bad_boxes_and_leaves_nothing(tmp_path: Path) -> None:
+    flat = ProxyBox("flat", np.array([[0, 0], [1, 0], [1, 1], [0, 1]]), 1.0, 1.0)
+    with pytest.raises(ValueError, match=r"boxes\[0\] 'flat'"):
+        write_usd_proxy(tmp_path / "scene_flat.usda", [flat])
+    nan = ProxyBox("nan", np.array([[0, 0], [np.nan, 0], [1, 1], [0, 1]]), 0.0, 1.0)
+    with pytest.raises(ValueError, match="finite"):
+        write_usd_proxy(tmp_path / "scene_flat.usda", [nan])
+    write_usd_proxy(tmp_path / "scene_flat.usda", [])
+    assert [p.name for p in tmp_path.iterdir()] == ["scene_flat.usda"]  # atomic: no temporary left
+    assert read_usd_proxy(tmp_path / "scene_flat.usda") == []
+
+
+def test_missing_usd_core_names_the_extra(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setitem(sys.modules, "pxr", None)  # import pxr now raises ImportError
+    for call in (lambda: write_usd_proxy(tmp_path / "x.usda", []), lambda: read_usd_proxy(tmp_path / "x.usda")):
+        with pytest.raises(MissingDependencyError) as info:
+            call()
+        assert info.value.module == "pxr" and info.value.extra == "usd" and "song[usd]" in str(info.value)
