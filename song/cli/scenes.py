@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import typer
+from rich import box
 
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
@@ -18,29 +19,40 @@ app.add_typer(scenes_app, name="scenes")
 @scenes_app.command("check")
 @handle_errors
 def check(folder: Path = typer.Argument(..., help="a scene package, or a folder of them")) -> None:
-    """Validate scene packages; one line per problem, non-zero exit if any fails."""
-    rows = []
+    """Validate scene packages: a status table, then one line per failed package; exit 1 if any fails."""
+    from song.datasets.scenes.ply import check_gaussian_ply
+
+    rows, problems = [], []
     for root in find_scene_packages(folder):
         try:
             package = load_scene_package(root)
-            smap = package.semantic_map
-            rows.append(
-                {
-                    "scene": smap.scene_id,
-                    "venue": smap.venue_type,
-                    "source": smap.source,
-                    "size": f"{package.occupancy.shape[1]}x{package.occupancy.shape[0]}",
-                    "objects": len(smap.objects),
-                    "status": "ok",
-                    "problem": "",
-                }
-            )
         except SongError as exc:
-            rows.append({"scene": root.name, "status": "failed", "problem": str(exc)})
-    columns = ["scene", "venue", "source", "size", "objects", "status", "problem"]
-    console.print(status_table(f"scene packages in {folder}", rows, columns))
-    failed = sum(row["status"] == "failed" for row in rows)
-    console.print(f"{len(rows) - failed} ok, {failed} failed")
+            rows.append({"scene": root.name, "status": "failed"})
+            problems.append((root.name, str(exc)))
+            continue
+        smap = package.semantic_map
+        ply, usd = package.gaussians_path, package.usd_path
+        rows.append(
+            {
+                "scene": smap.scene_id,
+                "venue": smap.venue_type,
+                "source": smap.source,
+                "size m": f"{smap.bounds[2] - smap.bounds[0]:.0f}x{smap.bounds[3] - smap.bounds[1]:.0f}",
+                "obj": len(smap.objects),
+                "splats": f"{check_gaussian_ply(ply):,}" if ply else "-",
+                "usd": "yes" if usd else "-",
+                "status": "ok",
+            }
+        )
+    columns = ["scene", "venue", "source", "size m", "obj", "splats", "usd", "status"]
+    table = status_table(f"scene packages in {folder}", rows, columns)
+    table.box, table.padding, table.show_edge = box.SIMPLE_HEAD, (0, 1, 0, 0), False  # fits 80 columns (CI logs)
+    table.columns[0].no_wrap = True
+    console.print(table)
+    for name, message in problems:  # whole, unwrapped lines: easy to grep and copy
+        console.print(f"[red]FAILED[/red] {name}: {message}", soft_wrap=True)
+    failed = len(problems)
+    console.print(f"{len(rows) - failed} ok, {failed} failed" if rows else f"no scene packages found in {folder}")
     if failed or not rows:
         raise typer.Exit(1)
 

@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from song.datasets.scenes.model import SemanticMap
 from song.datasets.scenes.occupancy import OccupancyGrid, encode_occupancy_png, read_occupancy_png
-from song.errors import SceneError
+from song.errors import FormatError, SceneError
 from song.util import sha256_file, write_bytes_atomic, write_text_atomic
 
 SEMANTIC_MAP = "semantic_map.json"
@@ -149,6 +149,28 @@ def check_consistency(smap: SemanticMap, grid: OccupancyGrid, root: Path, min_fr
         )
 
 
+def check_optional_files(root: Path) -> None:
+    """Cheap checks of the optional files: the PLY's header, schema and body size (no decoding),
+    the USD layer's text header and up axis (the full read is :func:`read_usd_proxy`)."""
+    from song.datasets.scenes.ply import check_gaussian_ply
+
+    gaussians = root / GAUSSIANS
+    if gaussians.exists():
+        try:
+            count = check_gaussian_ply(gaussians)
+        except FormatError as exc:
+            raise SceneError(exc.file, exc.field, exc.message) from exc
+        if count == 0:
+            raise SceneError(gaussians, "vertex", "holds no splats")
+    usd = root / USD_PROXY
+    if usd.exists():
+        head = usd.read_bytes()[:4096] if usd.is_file() else b""
+        if not head.startswith(b"#usda "):
+            raise SceneError(usd, "header", "not a USD text layer (expected '#usda 1.0' on the first line)")
+        if b'upAxis = "Z"' not in head.split(b"\n)", 1)[0]:
+            raise SceneError(usd, "upAxis", 'layer metadata must say upAxis = "Z"')
+
+
 def load_scene_package(root: str | Path, min_free_area_m2: float = 4.0) -> ScenePackage:
     """Load and fully validate a scene package folder.
 
@@ -163,6 +185,7 @@ def load_scene_package(root: str | Path, min_free_area_m2: float = 4.0) -> Scene
     check_consistency(smap, grid, root, min_free_area_m2)
     if smap.scene_id != root.name:
         raise SceneError(root / SEMANTIC_MAP, "scene_id", f"'{smap.scene_id}' does not match folder name '{root.name}'")
+    check_optional_files(root)
     return ScenePackage(root=root, semantic_map=smap, occupancy=grid)
 
 

@@ -79,7 +79,8 @@ def _open(path: Path):
         where = exc.element.name if exc.element else "body"
         if exc.prop is not None:
             where += f".{exc.prop.name}"
-        raise FormatError(path, where, f"truncated or malformed data ({exc.message})") from exc
+        row = f" at row {exc.row}" if exc.row is not None else ""
+        raise FormatError(path, where, f"truncated or malformed data{row} ({exc.message})") from exc
     except (PlyHeaderParseError, ValueError, OSError, EOFError, IndexError) as exc:
         raise FormatError(path, "header", f"not a readable PLY ({' '.join(str(exc).split())})") from exc
 
@@ -100,7 +101,8 @@ def _require(element, names: tuple[str, ...], kinds: str, path: Path) -> None:
             raise FormatError(path, f"{element.name}.{name}", "property is missing")
         dtype = np.dtype(getattr(prop, "val_dtype", "O"))
         if f"{dtype.kind}{dtype.itemsize}" not in kinds.split():
-            raise FormatError(path, f"{element.name}.{name}", f"has type {dtype}, expected {kinds.split()[0]}")
+            want = np.dtype(kinds.split()[0]).name
+            raise FormatError(path, f"{element.name}.{name}", f"has type {dtype.name}, expected {want}")
 
 
 STANDARD_REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity") + tuple(

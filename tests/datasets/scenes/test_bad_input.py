@@ -9,6 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from plyfile import PlyData, PlyElement
 from typer.testing import CliRunner
 
 from song.cli import app
@@ -47,6 +48,44 @@ def _image(fn: Callable[[np.ndarray], np.ndarray]) -> Callable[[Path], None]:
 
 def _write(name: str, data: bytes) -> Callable[[Path], None]:
     return lambda root: (root / name).write_bytes(data)
+
+
+GUITAR = Path(__file__).resolve().parents[2] / "data" / "playcanvas_splat" / "guitar.compressed.ply"
+PLY = "3dgs_compressed.ply"
+USD = "scene_flat.usda"
+
+
+def _ply(edit: Callable[[dict], None]) -> Callable[[Path], None]:
+    """A package PLY made from the real SuperSplat file with its arrays edited."""
+
+    def apply(root: Path) -> None:
+        ply = PlyData.read(str(GUITAR))
+        arrays = {e.name: np.array(e.data) for e in ply.elements}
+        edit(arrays)
+        PlyData([PlyElement.describe(a, k) for k, a in arrays.items()], text=False).write(str(root / PLY))
+
+    return apply
+
+
+def _retype_packed(arrays: dict) -> None:
+    v = arrays["vertex"]
+    arrays["vertex"] = v.astype([(k, "<f4" if k == "packed_color" else "<u4") for k in v.dtype.names])
+
+
+def _drop(path: str) -> Callable[[Path], None]:
+    return _edit_map(lambda data: data.pop(path))
+
+
+USDA_Y_UP = b'#usda 1.0\n(\n    metersPerUnit = 1\n    upAxis = "Y"\n)\n'
+EMPTY_PLY = (
+    b"ply\nformat binary_little_endian 1.0\nelement vertex 0\n"
+    + b"".join(
+        b"property float %s\n" % k.encode()
+        for k in ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2"]
+        + ["rot_0", "rot_1", "rot_2", "rot_3"]
+    )
+    + b"end_header\n"
+)
 
 
 CATALOGUE: list[tuple[str, Callable[[Path], None], str, str]] = [
@@ -89,6 +128,25 @@ CATALOGUE: list[tuple[str, Callable[[Path], None], str, str]] = [
     ("scene id not folder", _set("scene_id", "other"), "semantic_map.json: scene_id", "folder name"),
     ("unknown field", _set("colour", "red"), "semantic_map.json: colour", "Extra inputs"),
     ("path in occupancy", _set("occupancy.path", "../x.png"), "occupancy.path", "file name"),
+    ("missing bounds", _drop("bounds"), "semantic_map.json: bounds", "Field required"),
+    ("version not a number", _set("version", "one"), "semantic_map.json: version", "valid integer"),
+    ("inverted bounds", _set("bounds", [8, 0, 0, 4]), "semantic_map.json: bounds", "x_max > x_min"),
+    ("nan height", _set("objects.0.z_max", float("nan")), "objects[0].z_max", "finite"),
+    ("feet", _set("frame.units", "ft"), "semantic_map.json: frame.units", "'m'"),
+    (
+        "self-intersecting footprint",
+        _set("objects.0.footprint", [[1, 0.5], [2, 1], [2, 0.5], [1, 1]]),
+        "objects[0].footprint",
+        "self-intersecting",
+    ),
+    ("16-bit occupancy", _image(lambda c: c.astype(np.uint16) * 257), "occupancy.png", "8-bit"),
+    ("truncated ply", lambda r: (r / PLY).write_bytes(GUITAR.read_bytes()[:700_000]), f"{PLY}: vertex", "end-of-file"),
+    ("garbage ply", _write(PLY, b"PK\x03\x04 a zip, not a ply"), f"{PLY}: header", "not a readable PLY"),
+    ("ply without splats", _write(PLY, EMPTY_PLY), f"{PLY}: vertex", "no splats"),
+    ("ply chunk count", _ply(lambda a: a.update(chunk=a["chunk"][:-2])), f"{PLY}: chunk", "cannot hold"),
+    ("ply packed as float", _ply(_retype_packed), f"{PLY}: vertex.packed_color", "float32, expected uint32"),
+    ("usd binary", _write(USD, b"PXR-USDC\x00\x00"), f"{USD}: header", "not a USD text layer"),
+    ("usd y up", _write(USD, USDA_Y_UP), f"{USD}: upAxis", 'upAxis = "Z"'),
 ]
 
 
