@@ -369,7 +369,8 @@ def write_compressed_ply(path: str | Path, cloud: GaussianCloud, *, morton: bool
     if cloud.sh_rest is not None and cloud.sh_rest.shape[1] * 3 not in SH_COUNTS:
         raise ValueError(f"sh_rest has {cloud.sh_rest.shape[1]} coefficients; compressed PLY holds 3, 8 or 15")
     if morton:
-        cloud = GaussianCloud(*(None if a is None else a[morton_order(cloud.means)] for a in vars(cloud).values()))
+        order = morton_order(cloud.means)
+        cloud = GaussianCloud(*(None if a is None else a[order] for a in vars(cloud).values()))
     n_chunks = (n + CHUNK - 1) // CHUNK
     index = np.arange(n) // CHUNK
     groups = {
