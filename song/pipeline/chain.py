@@ -35,13 +35,13 @@ from song.util import derive_rng, sha256_file, sha256_json, write_json_atomic
 STAGES_FILE = "stages.json"
 RUN_FILE = "run.json"
 SCENES_DIR = "scenes"
-# Pipeline order; a module that is not present yet (a later issue) is simply not registered.
+# Stages that `song synth` runs, in pipeline order. Motion and binding (issues #5, #6) join this list
+# when they land together with end-to-end tests; until then a module of theirs is not run by synth.
 STAGE_MODULES = (
     "song.pipeline.intents",
     "song.pipeline.crowd",
-    "song.pipeline.motion",
-    "song.pipeline.binding",
 )
+PIPELINE_ORDER = ("intents", "crowd", "motion", "binding")
 
 Status = Literal["ok", "skipped", "failed"]
 
@@ -114,7 +114,7 @@ def load_stages() -> list[Stage]:
         except ModuleNotFoundError as exc:
             if exc.name != module:
                 raise
-    order = {name.rsplit(".", 1)[1]: index for index, name in enumerate(STAGE_MODULES)}
+    order = {name: index for index, name in enumerate(PIPELINE_ORDER)}
     return sorted(_REGISTRY.values(), key=lambda stage: order.get(stage.name, len(order)))
 
 
