@@ -1,15 +1,35 @@
-"""ORCA (optimal reciprocal collision avoidance) between agents, vectorised over agents (numpy).
+"""ORCA (optimal reciprocal collision avoidance), vectorised over agents in numpy, with RVO2 semantics.
 
-Semantics follow RVO2's ``Agent::computeNewVelocity`` for agent–agent constraints: each neighbour
-within ``neighbor_dist`` (the ``max_neighbors`` nearest) contributes a half-plane of permitted
-velocities with reciprocal ½ responsibility, cut off at ``time_horizon`` (or, when already
-overlapping, at one time step); the new velocity is the one closest to the preferred velocity inside
-all half-planes and the max-speed disc, found by the 2-D incremental LP (``linearProgram1/2``).
-When the 2-D LP is infeasible (a dense crowd), the 3-D LP (``linearProgram3``) picks the velocity
-that minimises the largest violation, as RVO2 does. Walls are handled by the crowd simulation
-(positions constrained to the walkable area), not here. ``_reference.py`` holds a per-agent twin.
+What one call of :func:`orca_step` computes is what RVO2's ``RVOSimulator::doStep`` computes before it
+moves the agents (``Agent::computeNeighbors`` + ``Agent::computeNewVelocity``), for all agents at once:
 
-Every LP step runs for all agents at once with masks, which is what makes it fast in numpy.
+* agent neighbours: the ``max_neighbors`` nearest other agents strictly within ``neighbor_dist``,
+  nearest first (RVO2's k-d tree query);
+* obstacle neighbours: every obstacle edge that the agent sees from its outer (right) side within
+  ``time_horizon_obst * max_speed + radius``, nearest first, ties in the order of RVO2's obstacle BSP
+  tree walk (``KdTree::queryObstacleTreeRecursive``); the tree, with the edge splits RVO2 makes while
+  building it, is built once by :func:`build_obstacles`;
+* obstacle half-planes first (legs, cut-off line and circles, convexity, foreign legs, and the
+  "already covered by an earlier obstacle line" test), then agent half-planes with reciprocal ½
+  responsibility, cut off at ``time_horizon`` or, when two agents already overlap, at one time step;
+* the new velocity: closest to the preferred one inside the max-speed disc and every half-plane
+  (``linearProgram1/2``); where that is empty, the velocity that minimises the largest violation of
+  the agent half-planes while keeping the obstacle ones hard (``linearProgram3``).
+
+How it is vectorised. Lines live in padded ``(N, L)`` arrays (obstacle slots first, then agent slots);
+an unused slot holds a line that the whole max-speed disc satisfies and that never bounds another, so
+no masks are needed in the LP. The 2-D LP is solved for all agents with no loop over constraints: its
+optimum is unique, and it is either the (disc-clipped) preferred velocity or, for some line i, the
+point of line i closest to the preferred velocity within the interval that the disc and *all* other
+lines leave on line i -- the same point RVO2's incremental algorithm ends on, computed from all
+``(N, L, L)`` line pairs at once. Agents whose 2-D LP is infeasible (dense crowds; rare) rerun the
+incremental 2-D LP (to learn where it fails, which ``linearProgram3`` starts from) and then the 3-D LP,
+one line at a time for all of them together, with the inner direction-optimising 2-D LPs solved the
+same loop-free way. ``_reference.py`` is the plain one-agent-at-a-time transcription it is tested
+against.
+
+Computes in float64 (RVO2 uses float32). Degenerate ties (two lines within ``EPS`` of parallel, equal
+optima) may resolve differently from RVO2; every other result is the same up to rounding.
 """
 
 from __future__ import annotations
@@ -18,169 +38,541 @@ from dataclasses import dataclass
 
 import numpy as np
 
-EPS = 1e-5  # RVO_EPSILON
+EPS = 1e-5  # RVO_EPSILON: parallel-line threshold in the LPs, side tests in the obstacle tree
+FAR = 1e6  # offset (m/s) of the filler line in unused slots: far outside any max-speed disc
+DENSE_NEIGHBOURS_MAX_N = 96  # up to this many agents a dense distance matrix beats a k-d tree
 
 
 @dataclass(frozen=True)
 class OrcaParams:
-    """Time step (s), neighbour search (m, count) and time horizon (s)."""
+    """ORCA parameters shared by all agents (RVO2's agent defaults plus the simulator time step).
+
+    Attributes:
+        time_step: simulation step, s (the cut-off for agents already overlapping).
+        neighbor_dist: agents strictly closer than this (m, centre to centre) are neighbours.
+        max_neighbors: at most this many (the nearest) neighbours per agent.
+        time_horizon: agent half-planes keep collisions out for this long, s.
+        time_horizon_obst: obstacle half-planes keep collisions out for this long, s.
+    """
 
     time_step: float
     neighbor_dist: float
     max_neighbors: int
     time_horizon: float
+    time_horizon_obst: float
 
 
-def _det(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+@dataclass(frozen=True)
+class ObstacleSet:
+    """Obstacle vertices as RVO2 holds them after ``processObstacles`` (edge splits included).
+
+    Vertex v is the start of the edge v -> next[v]. Arrays: ``points`` (V, 2) float64 m,
+    ``next``/``prev`` (V,) int64, ``directions`` (V, 2) unit edge directions, ``convex`` (V,) bool.
+    The BSP tree has one node per vertex: ``node_left``/``node_right`` (V,) child vertex or -1,
+    ``subtree`` (V,) node count of the subtree rooted at the vertex; ``ancestors`` (V, D) the path
+    from the root (-1 padded) and ``in_left`` (V, D) whether the vertex lies in that ancestor's left
+    subtree, used to order equally distant edges as the tree walk does.
+    """
+
+    points: np.ndarray
+    next: np.ndarray
+    prev: np.ndarray
+    directions: np.ndarray
+    convex: np.ndarray
+    node_left: np.ndarray
+    node_right: np.ndarray
+    subtree: np.ndarray
+    ancestors: np.ndarray
+    in_left: np.ndarray
+    root: int
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.points)
 
 
-def neighbours(positions: np.ndarray, params: OrcaParams) -> tuple[np.ndarray, np.ndarray]:
-    """(N, K) neighbour indices sorted by distance and a validity mask (within distance, not self)."""
+def _left_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """RVO2's ``leftOf``: > 0 when c is left of the directed line a -> b (arrays (..., 2))."""
+    return (a[..., 0] - c[..., 0]) * (b[..., 1] - a[..., 1]) - (a[..., 1] - c[..., 1]) * (b[..., 0] - a[..., 0])
+
+
+def build_obstacles(polygons: list[np.ndarray]) -> ObstacleSet:
+    """Obstacle vertices and RVO2's obstacle BSP tree (``addObstacle`` + ``processObstacles``).
+
+    Args:
+        polygons: each (K, 2) float64, m, in RVO2 vertex order: counter-clockwise around a solid
+            obstacle, clockwise for a boundary that encloses free space. K == 2 is a single
+            two-sided segment (as in RVO2); K < 2 is skipped, as RVO2 does.
+
+    Returns:
+        The obstacle set, including the vertices RVO2 adds where the tree splits an edge.
+    """
+    pts: list[np.ndarray] = []
+    nxt: list[int] = []
+    prv: list[int] = []
+    dirs: list[np.ndarray] = []
+    convex: list[bool] = []
+    for poly in polygons:
+        poly = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+        k, base = len(poly), len(pts)
+        if k < 2:
+            continue
+        for i in range(k):
+            a, b, c = poly[i - 1], poly[i], poly[(i + 1) % k]
+            pts.append(b.copy())
+            nxt.append(base + (i + 1) % k)
+            prv.append(base + (i - 1) % k)
+            edge = c - b
+            dirs.append(edge / np.hypot(*edge))
+            convex.append(True if k == 2 else bool(_left_of(a, b, c) >= 0.0))
+    left: list[int] = []
+    right: list[int] = []
+
+    def split_node(items: list[int]) -> int:
+        """``buildObstacleTreeRecursive``: returns the root vertex of the subtree (-1 if empty)."""
+        if not items:
+            return -1
+        p = np.array([pts[i] for i in items])
+        q = np.array([pts[nxt[i]] for i in items])
+        s1 = _left_of(p[:, None], q[:, None], p[None])  # [i, j]: side of j's start w.r.t. i's line
+        s2 = _left_of(p[:, None], q[:, None], q[None])
+        on_left = (s1 >= -EPS) & (s2 >= -EPS)
+        on_right = ~on_left & (s1 <= EPS) & (s2 <= EPS)
+        off = ~np.eye(len(items), dtype=bool)
+        n_left = ((~on_right) & off).sum(1)  # left, or split (counts on both sides)
+        n_right = ((~on_left) & off).sum(1)
+        key = np.maximum(n_left, n_right) * (len(items) + 1) + np.minimum(n_left, n_right)
+        best = int(np.argmin(key))  # first minimum of (max, min), as RVO2's strict "<"
+        i1 = items[best]
+        a, b = pts[i1], pts[nxt[i1]]
+        lefts, rights = [], []
+        for j, j1 in enumerate(items):
+            if j == best:
+                continue
+            if on_left[best, j]:
+                lefts.append(j1)
+            elif on_right[best, j]:
+                rights.append(j1)
+            else:  # split edge j1 -> j2 where it crosses the line of edge i1
+                j2 = nxt[j1]
+                t = _cross(b - a, pts[j1] - a) / _cross(b - a, pts[j1] - pts[j2])
+                new = len(pts)
+                pts.append(pts[j1] + t * (pts[j2] - pts[j1]))
+                dirs.append(dirs[j1])
+                nxt.append(j2)
+                prv.append(j1)
+                convex.append(True)
+                left.append(-1)
+                right.append(-1)
+                nxt[j1] = new
+                prv[j2] = new
+                if s1[best, j] > 0.0:
+                    lefts.append(j1)
+                    rights.append(new)
+                else:
+                    rights.append(j1)
+                    lefts.append(new)
+        left[i1] = split_node(lefts)
+        right[i1] = split_node(rights)
+        return i1
+
+    left.extend([-1] * len(pts))
+    right.extend([-1] * len(pts))
+    root = split_node(list(range(len(pts))))
+    return _finish_obstacles(pts, nxt, prv, dirs, convex, left, right, root)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _finish_obstacles(pts, nxt, prv, dirs, convex, left, right, root) -> ObstacleSet:
+    """Freeze the lists into arrays and precompute subtree sizes and root-to-node paths."""
+    n = len(pts)
+    subtree = np.zeros(n, dtype=np.int64)
+    paths: list[list[tuple[int, bool]]] = [[] for _ in range(n)]
+    order, stack = [], [root] if root >= 0 else []
+    while stack:  # pre-order walk: parents before children
+        v = stack.pop()
+        order.append(v)
+        for child, is_left in ((left[v], True), (right[v], False)):
+            if child >= 0:
+                paths[child] = [*paths[v], (v, is_left)]
+                stack.append(child)
+    for v in reversed(order):
+        subtree[v] = 1 + sum(subtree[c] for c in (left[v], right[v]) if c >= 0)
+    depth = max((len(p) for p in paths), default=0)
+    ancestors = np.full((n, max(depth, 1)), -1, dtype=np.int64)
+    in_left = np.zeros((n, max(depth, 1)), dtype=bool)
+    for v, path in enumerate(paths):
+        for k, (a, is_left) in enumerate(path):
+            ancestors[v, k], in_left[v, k] = a, is_left
+    return ObstacleSet(
+        points=np.array(pts, dtype=np.float64).reshape(-1, 2),
+        next=np.array(nxt, dtype=np.int64),
+        prev=np.array(prv, dtype=np.int64),
+        directions=np.array(dirs, dtype=np.float64).reshape(-1, 2),
+        convex=np.array(convex, dtype=bool),
+        node_left=np.array(left, dtype=np.int64),
+        node_right=np.array(right, dtype=np.int64),
+        subtree=subtree,
+        ancestors=ancestors,
+        in_left=in_left,
+        root=int(root),
+    )
+
+
+def _agent_neighbours(positions: np.ndarray, params: OrcaParams) -> tuple[np.ndarray, np.ndarray]:
+    """Neighbour indices (N, K) nearest first (ties by index) and their validity mask (N, K)."""
     n = len(positions)
-    k = min(params.max_neighbors, max(n - 1, 0))
-    if k == 0:
+    k = min(params.max_neighbors, n - 1)
+    if k <= 0:
         return np.zeros((n, 0), dtype=np.int64), np.zeros((n, 0), dtype=bool)
-    d2 = ((positions[:, None, :] - positions[None, :, :]) ** 2).sum(-1)
-    np.fill_diagonal(d2, np.inf)
-    order = np.argsort(d2, axis=1, kind="stable")[:, :k]
-    valid = np.take_along_axis(d2, order, axis=1) < params.neighbor_dist**2
-    return order, valid
+    range_sq = params.neighbor_dist**2
+    if n <= DENSE_NEIGHBOURS_MAX_N:
+        dx = positions[:, None, 0] - positions[None, :, 0]
+        dy = positions[:, None, 1] - positions[None, :, 1]
+        d2 = dx * dx + dy * dy
+        d2[np.arange(n), np.arange(n)] = np.inf
+        idx = np.argsort(d2, axis=1, kind="stable")[:, :k]
+        return idx, np.take_along_axis(d2, idx, axis=1) < range_sq
+    from scipy.spatial import cKDTree
+
+    _, idx = cKDTree(positions).query(positions, k=k + 1, distance_upper_bound=params.neighbor_dist)
+    idx = np.where(idx == np.arange(n)[:, None], n, idx)  # drop self; n marks "none"
+    safe = np.minimum(idx, n - 1)
+    d2 = ((positions[safe] - positions[:, None, :]) ** 2).sum(-1)
+    d2 = np.where(idx < n, d2, np.inf)
+    order = np.lexsort((idx, d2), axis=1)[:, :k]  # the k-d tree's own ties are not RVO2's: re-sort
+    idx, d2 = np.take_along_axis(idx, order, axis=1), np.take_along_axis(d2, order, axis=1)
+    valid = d2 < range_sq
+    return np.where(valid, idx, 0), valid
 
 
-def agent_lines(
-    positions: np.ndarray, velocities: np.ndarray, radii: np.ndarray, params: OrcaParams
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ORCA half-planes: ``(points (N, K, 2), directions (N, K, 2), valid (N, K))``.
-
-    A velocity v is permitted by line (p, d) when det(d, p − v) ≤ 0 (v on the left of d).
-    """
-    idx, valid = neighbours(positions, params)
-    rel_pos = positions[idx] - positions[:, None, :]
-    rel_vel = velocities[:, None, :] - velocities[idx]
-    dist_sq = (rel_pos**2).sum(-1)
+def _agent_lines(positions, velocities, radii, params: OrcaParams):
+    """Agent half-planes ``(px, py, dx, dy, valid)`` each (N, K); unused slots hold the filler line."""
+    idx, valid = _agent_neighbours(positions, params)
+    rx = positions[idx, 0] - positions[:, None, 0]
+    ry = positions[idx, 1] - positions[:, None, 1]
+    vx = velocities[:, None, 0] - velocities[idx, 0]
+    vy = velocities[:, None, 1] - velocities[idx, 1]
+    dist_sq = rx * rx + ry * ry
     r = radii[:, None] + radii[idx]
-    r_sq = r**2
-    inv_h = 1.0 / params.time_horizon
+    r_sq = r * r
     apart = dist_sq > r_sq
-
-    # not colliding: project on the cut-off circle or on a leg of the truncated cone
-    w = rel_vel - inv_h * rel_pos
-    w_sq = (w**2).sum(-1)
-    dot1 = (w * rel_pos).sum(-1)
-    on_circle = apart & (dot1 < 0.0) & (dot1**2 > r_sq * w_sq)
-    w_len = np.sqrt(np.maximum(w_sq, 1e-300))
-    unit_w = w / w_len[..., None]
-    dir_circle = np.stack([unit_w[..., 1], -unit_w[..., 0]], -1)
-    u_circle = (r * inv_h - w_len)[..., None] * unit_w
-    leg = np.sqrt(np.maximum(dist_sq - r_sq, 0.0))
-    px, py = rel_pos[..., 0], rel_pos[..., 1]
-    safe_d = np.where(dist_sq > 0, dist_sq, 1.0)
-    left = np.stack([px * leg - py * r, px * r + py * leg], -1) / safe_d[..., None]
-    right = -np.stack([px * leg + py * r, -px * r + py * leg], -1) / safe_d[..., None]
-    is_left = _det(rel_pos, w) > 0.0
-    dir_leg = np.where(is_left[..., None], left, right)
-    u_leg = (rel_vel * dir_leg).sum(-1)[..., None] * dir_leg - rel_vel
-
-    # colliding: cut off at one time step
-    inv_dt = 1.0 / params.time_step
-    wc = rel_vel - inv_dt * rel_pos
-    wc_len = np.sqrt(np.maximum((wc**2).sum(-1), 1e-300))
-    unit_wc = wc / wc_len[..., None]
-    dir_coll = np.stack([unit_wc[..., 1], -unit_wc[..., 0]], -1)
-    u_coll = (r * inv_dt - wc_len)[..., None] * unit_wc
-
-    direction = np.where(apart[..., None], np.where(on_circle[..., None], dir_circle, dir_leg), dir_coll)
-    u = np.where(apart[..., None], np.where(on_circle[..., None], u_circle, u_leg), u_coll)
-    points = velocities[:, None, :] + 0.5 * u
-    return points, direction, valid
+    # apart: w from the cut-off centre (rel_pos / tau) to the relative velocity; overlapping: from rel_pos / dt
+    inv = np.where(apart, 1.0 / params.time_horizon, 1.0 / params.time_step)
+    wx, wy = vx - inv * rx, vy - inv * ry
+    w_sq = wx * wx + wy * wy
+    dot = wx * rx + wy * ry
+    circle = ~apart | ((dot < 0.0) & (dot * dot > r_sq * w_sq))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w_len = np.sqrt(w_sq)
+        ux, uy = wx / w_len, wy / w_len
+        leg = np.sqrt(np.where(apart, dist_sq - r_sq, 0.0))
+        side = np.where(rx * wy - ry * wx > 0.0, 1.0, -1.0)  # +1: left leg, -1: right leg
+        lx = (rx * leg - side * ry * r) / dist_sq
+        ly = (side * rx * r + ry * leg) / dist_sq
+        lx, ly = side * lx, side * ly
+    proj = vx * lx + vy * ly
+    dx = np.where(circle, uy, lx)
+    dy = np.where(circle, -ux, ly)
+    scale = r * inv - w_len
+    ux_ = np.where(circle, scale * ux, proj * lx - vx)
+    uy_ = np.where(circle, scale * uy, proj * ly - vy)
+    px = velocities[:, None, 0] + 0.5 * ux_
+    py = velocities[:, None, 1] + 0.5 * uy_
+    return (*_fill(px, py, dx, dy, valid), valid)
 
 
-def _lp1(points, dirs, valid, line, radius, opt, rows, direction_opt=False):
-    """linearProgram1 for the agents ``rows`` on their line ``line``; returns (ok, result).
+def _fill(px, py, dx, dy, valid):
+    """Replace unused slots by the filler line: direction (1, 0) through (0, -FAR), always satisfied."""
+    return (
+        np.where(valid, px, 0.0),
+        np.where(valid, py, -FAR),
+        np.where(valid, dx, 1.0),
+        np.where(valid, dy, 0.0),
+    )
 
-    With ``direction_opt`` (used by linearProgram3), ``opt`` is a unit direction to go furthest along.
+
+def _obstacle_neighbours(positions, radii, max_speeds, obs: ObstacleSet, params: OrcaParams):
+    """Obstacle edges per agent (N, M) nearest first, ties in RVO2's tree-walk order, and a mask."""
+    n = len(positions)
+    a = obs.points[None]
+    b = obs.points[obs.next][None]
+    p = positions[:, None, :]
+    side = _left_of(a, b, p)  # (N, V)
+    ex, ey = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    qx, qy = p[..., 0] - a[..., 0], p[..., 1] - a[..., 1]
+    s = (qx * ex + qy * ey) / (ex * ex + ey * ey)
+    # distance to the closest point of the edge, as RVO2 writes it (equal corner distances tie exactly)
+    cx = np.where(s < 0.0, a[..., 0], np.where(s > 1.0, b[..., 0], a[..., 0] + s * ex))
+    cy = np.where(s < 0.0, a[..., 1], np.where(s > 1.0, b[..., 1], a[..., 1] + s * ey))
+    d2 = (p[..., 0] - cx) ** 2 + (p[..., 1] - cy) ** 2
+    reach = params.time_horizon_obst * max_speeds + radii
+    sel = (side < 0.0) & (d2 < (reach * reach)[:, None])
+    counts = sel.sum(1)
+    m = int(counts.max()) if n else 0
+    if m == 0:
+        return np.zeros((n, 0), dtype=np.int64), np.zeros((n, 0), dtype=bool)
+    rank = np.zeros(sel.shape, dtype=np.int64)
+    ag, vx = np.nonzero(sel)
+    rank[ag, vx] = _walk_rank(positions[ag], vx, obs)
+    order = np.lexsort((rank, np.where(sel, d2, np.inf)), axis=1)[:, :m]
+    return order, np.arange(m)[None, :] < counts[:, None]
+
+
+def _walk_rank(pos: np.ndarray, v: np.ndarray, obs: ObstacleSet) -> np.ndarray:
+    """Position of node v in the tree walk ``queryObstacleTreeRecursive`` makes from pos (pairs (P,))."""
+    anc = obs.ancestors[v]  # (P, D)
+    live = anc >= 0
+    a = np.where(live, anc, 0)
+    near_left = _left_of(obs.points[a], obs.points[obs.next[a]], pos[:, None, :]) >= 0.0
+    near = np.where(near_left, obs.node_left[a], obs.node_right[a])
+    near_size = np.where(near >= 0, obs.subtree[np.maximum(near, 0)], 0)
+    skipped = np.where(live & (near_left != obs.in_left[v]), near_size + 1, 0).sum(1)
+    own_left = _left_of(obs.points[v], obs.points[obs.next[v]], pos) >= 0.0
+    own_near = np.where(own_left, obs.node_left[v], obs.node_right[v])
+    return skipped + np.where(own_near >= 0, obs.subtree[np.maximum(own_near, 0)], 0)
+
+
+def _normalised(x, y):
+    length = np.sqrt(x * x + y * y)
+    return x / length, y / length
+
+
+def _tangents(rx, ry, r):
+    """Left and right tangent (leg) directions from the agent to a circle of radius r at (rx, ry)."""
+    d2 = rx * rx + ry * ry
+    leg = np.sqrt(np.maximum(d2 - r * r, 0.0))
+    left = ((rx * leg - ry * r) / d2, (rx * r + ry * leg) / d2)
+    right = ((rx * leg + ry * r) / d2, (-rx * r + ry * leg) / d2)
+    return left, right
+
+
+def _obstacle_lines(positions, velocities, radii, max_speeds, obs: ObstacleSet, params: OrcaParams):
+    """Obstacle half-planes ``(px, py, dx, dy, emitted)`` each (N, M), or None when no agent sees an edge.
+
+    The first loop of ``computeNewVelocity``, for all (agent, edge) pairs at once; only the "already
+    covered by an earlier line" test runs edge slot by edge slot.
     """
-    p = points[rows, line]
-    d = dirs[rows, line]
-    dot = (p * d).sum(-1)
-    disc = dot**2 + radius[rows] ** 2 - (p**2).sum(-1)
-    ok = disc >= 0.0
+    o1, valid = _obstacle_neighbours(positions, radii, max_speeds, obs, params)
+    if o1.shape[1] == 0:
+        return None
+    pts, dirs, cvx, prev, nxt = obs.points, obs.directions, obs.convex, obs.prev, obs.next
+    inv = 1.0 / params.time_horizon_obst
+    px0, py0 = positions[:, None, 0], positions[:, None, 1]
+    vx, vy = velocities[:, None, 0], velocities[:, None, 1]
+    r = radii[:, None]
+    r_sq = r * r
+    o2 = nxt[o1]
+    r1x, r1y = pts[o1, 0] - px0, pts[o1, 1] - py0
+    r2x, r2y = pts[o2, 0] - px0, pts[o2, 1] - py0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d1, d2 = r1x * r1x + r1y * r1y, r2x * r2x + r2y * r2y
+        ovx, ovy = pts[o2, 0] - pts[o1, 0], pts[o2, 1] - pts[o1, 1]
+        s = (-r1x * ovx - r1y * ovy) / (ovx * ovx + ovy * ovy)
+        dline = (-r1x - s * ovx) ** 2 + (-r1y - s * ovy) ** 2
+        # already touching a vertex or the edge: the line through the agent's velocity origin
+        hit_left = (s < 0.0) & (d1 <= r_sq)
+        hit_right = ~hit_left & (s > 1.0) & (d2 <= r_sq)
+        hit_edge = (s >= 0.0) & (s <= 1.0) & (dline <= r_sq)
+        hit = hit_left | hit_right | hit_edge
+        emit_hit = (hit_left & cvx[o1]) | (hit_right & cvx[o2] & (r2x * dirs[o2, 1] - r2y * dirs[o2, 0] >= 0.0))
+        emit_hit |= hit_edge
+        hx, hy = _normalised(np.where(hit_left, -r1y, -r2y), np.where(hit_left, r1x, r2x))
+        hx, hy = np.where(hit_edge, -dirs[o1, 0], hx), np.where(hit_edge, -dirs[o1, 1], hy)
+        # no collision: legs; seen obliquely, both legs come from one vertex
+        obl_left = ~hit & (s < 0.0) & (dline <= r_sq)
+        obl_right = ~hit & (s > 1.0) & (dline <= r_sq)
+        usual = ~hit & ~obl_left & ~obl_right
+        emit_legs = ~hit & ~(obl_left & ~cvx[o1]) & ~(obl_right & ~cvx[o2])
+        a1 = np.where(obl_right, o2, o1)
+        a2 = np.where(obl_left, o1, o2)
+        (llx, lly), _ = _tangents(np.where(obl_right, r2x, r1x), np.where(obl_right, r2y, r1y), r)
+        _, (rlx, rly) = _tangents(np.where(obl_left, r1x, r2x), np.where(obl_left, r1y, r2y), r)
+        flat_l, flat_r = usual & ~cvx[o1], usual & ~cvx[o2]  # non-convex vertex: leg extends the cut-off
+        llx, lly = np.where(flat_l, -dirs[o1, 0], llx), np.where(flat_l, -dirs[o1, 1], lly)
+        rlx, rly = np.where(flat_r, dirs[o1, 0], rlx), np.where(flat_r, dirs[o1, 1], rly)
+        # a leg pointing into the neighbouring edge is replaced by that edge ("foreign" leg)
+        nbx, nby = -dirs[prev[a1], 0], -dirs[prev[a1], 1]
+        foreign_l = cvx[a1] & (llx * nby - lly * nbx >= 0.0)
+        llx, lly = np.where(foreign_l, nbx, llx), np.where(foreign_l, nby, lly)
+        foreign_r = cvx[a2] & (rlx * dirs[a2, 1] - rly * dirs[a2, 0] <= 0.0)
+        rlx, rly = np.where(foreign_r, dirs[a2, 0], rlx), np.where(foreign_r, dirs[a2, 1], rly)
+        lcx, lcy = inv * (pts[a1, 0] - px0), inv * (pts[a1, 1] - py0)
+        rcx, rcy = inv * (pts[a2, 0] - px0), inv * (pts[a2, 1] - py0)
+        cux, cuy = rcx - lcx, rcy - lcy
+        same = a1 == a2
+        t = np.where(same, 0.5, ((vx - lcx) * cux + (vy - lcy) * cuy) / (cux * cux + cuy * cuy))
+        t_l = (vx - lcx) * llx + (vy - lcy) * lly
+        t_r = (vx - rcx) * rlx + (vy - rcy) * rly
+        on_lc = ((t < 0.0) & (t_l < 0.0)) | (same & (t_l < 0.0) & (t_r < 0.0))
+        on_rc = ~on_lc & (t > 1.0) & (t_r < 0.0)
+        ccx, ccy = np.where(on_lc, lcx, rcx), np.where(on_lc, lcy, rcy)
+        ux, uy = _normalised(vx - ccx, vy - ccy)
+        inf = np.inf
+        d_cut = np.where((t < 0.0) | (t > 1.0) | same, inf, (vx - lcx - t * cux) ** 2 + (vy - lcy - t * cuy) ** 2)
+        d_l = np.where(t_l < 0.0, inf, (vx - lcx - t_l * llx) ** 2 + (vy - lcy - t_l * lly) ** 2)
+        d_r = np.where(t_r < 0.0, inf, (vx - rcx - t_r * rlx) ** 2 + (vy - rcy - t_r * rly) ** 2)
+        cut = (d_cut <= d_l) & (d_cut <= d_r)
+        use_l = ~cut & (d_l <= d_r)
+        use_r = ~cut & ~use_l
+        circ = on_lc | on_rc
+        ldx = np.where(cut, -dirs[a1, 0], np.where(use_l, llx, -rlx))
+        ldy = np.where(cut, -dirs[a1, 1], np.where(use_l, lly, -rly))
+        bx, by = np.where(use_r, rcx, lcx), np.where(use_r, rcy, lcy)
+        k = r * inv
+        dx = np.where(hit, hx, np.where(circ, uy, ldx))
+        dy = np.where(hit, hy, np.where(circ, -ux, ldy))
+        px = np.where(hit, 0.0, np.where(circ, ccx + k * ux, bx + k * -ldy))
+        py = np.where(hit, 0.0, np.where(circ, ccy + k * uy, by + k * ldx))
+    emit_leg_line = circ | cut | (use_l & ~foreign_l) | (use_r & ~foreign_r)
+    emits = valid & np.where(hit, emit_hit, emit_legs & emit_leg_line)
+    # skip an edge whose velocity obstacle an earlier emitted line already covers (both cut-off centres)
+    kr = inv * radii[:, None, None]
+    c1 = (inv * r1x[:, None, :] - px[:, :, None]) * dy[:, :, None] - (inv * r1y[:, None, :] - py[:, :, None]) * dx[
+        :, :, None
+    ] - kr >= -EPS
+    c2 = (inv * r2x[:, None, :] - px[:, :, None]) * dy[:, :, None] - (inv * r2y[:, None, :] - py[:, :, None]) * dx[
+        :, :, None
+    ] - kr >= -EPS
+    covers = c1 & c2  # [n, j, k]: line j covers edge k
+    emitted = emits.copy()
+    for k_ in range(1, emitted.shape[1]):
+        emitted[:, k_] &= ~(covers[:, :k_, k_] & emitted[:, :k_]).any(1)
+    return (*_fill(px, py, dx, dy, emitted), emitted)
+
+
+def _intervals(px, py, dx, dy, radius):
+    """For every line i of every agent, the interval [t_left, t_right] of ``p_i + t d_i`` that the
+    max-speed disc and all other lines allow (``linearProgram1`` over all lines at once); (N, L) each,
+    plus whether it is non-empty."""
+    dot = px * dx + py * dy
+    disc = dot * dot + (radius * radius)[:, None] - (px * px + py * py)
     sq = np.sqrt(np.maximum(disc, 0.0))
-    t_left, t_right = -dot - sq, -dot + sq
-    for j in range(line):
-        use = valid[rows, j]
-        denom = _det(d, dirs[rows, j])
-        numer = _det(dirs[rows, j], p - points[rows, j])
-        parallel = use & (np.abs(denom) <= EPS)
-        ok &= ~(parallel & (numer < 0.0))
-        t = numer / np.where(np.abs(denom) <= EPS, 1.0, denom)
-        cut = use & ~parallel
-        t_right = np.where(cut & (denom >= 0.0), np.minimum(t_right, t), t_right)
-        t_left = np.where(cut & (denom < 0.0), np.maximum(t_left, t), t_left)
-        ok &= t_left <= t_right
-    if direction_opt:
-        t = np.where((opt[rows] * d).sum(-1) > 0.0, t_right, t_left)
-    else:
-        t = np.clip((d * (opt[rows] - p)).sum(-1), t_left, t_right)
-    return ok, p + t[:, None] * d
+    den = dx[:, :, None] * dy[:, None, :] - dy[:, :, None] * dx[:, None, :]  # det(d_i, d_j)
+    num = dx[:, None, :] * (py[:, :, None] - py[:, None, :]) - dy[:, None, :] * (px[:, :, None] - px[:, None, :])
+    par = np.abs(den) <= EPS  # includes j == i (den == num == 0)
+    t = num / np.where(par, 1.0, den)
+    t_right = np.minimum(np.where(par | (den < 0.0), np.inf, t).min(2), sq - dot)
+    t_left = np.maximum(np.where(par | (den >= 0.0), -np.inf, t).max(2), -sq - dot)
+    ok = (disc >= 0.0) & ~(par & (num < 0.0)).any(2) & (t_left <= t_right)
+    return t_left, t_right, ok
 
 
-def _lp2(points, dirs, valid, radius, opt, direction_opt=False):
-    """linearProgram2 for all agents; returns (result (N, 2), first failing line (N,), −1 = none)."""
-    n, k = valid.shape
-    speed = np.linalg.norm(opt, axis=1)
-    if direction_opt:
-        result = opt * radius[:, None]
-    else:
-        result = np.where((speed > radius)[:, None], opt / np.maximum(speed, 1e-300)[:, None] * radius[:, None], opt)
-    fail = np.full(n, -1)
-    for i in range(k):
-        viol = valid[:, i] & (fail < 0) & (_det(dirs[:, i], points[:, i] - result) > 0.0)
-        rows = np.flatnonzero(viol)
+def _violation(px, py, dx, dy, vx, vy):
+    """det(d, p - v): > 0 where velocity v breaks the half-plane (p, d)."""
+    return dx * (py - vy) - dy * (px - vx)
+
+
+def _lp_closest(px, py, dx, dy, radius, ox, oy):
+    """2-D LP, closest-point mode, loop-free: (vx, vy, feasible), each (N,)."""
+    speed_sq = ox * ox + oy * oy
+    outside = speed_sq > radius * radius
+    with np.errstate(divide="ignore", invalid="ignore"):
+        norm = np.sqrt(speed_sq)
+        v0x = np.where(outside, ox / norm * radius, ox)
+        v0y = np.where(outside, oy / norm * radius, oy)
+    if px.shape[1] == 0:
+        return v0x, v0y, np.ones(len(ox), dtype=bool)
+    ok0 = (_violation(px, py, dx, dy, v0x[:, None], v0y[:, None]) <= 0.0).all(1)
+    t_left, t_right, ok = _intervals(px, py, dx, dy, radius)
+    t = np.clip(dx * (ox[:, None] - px) + dy * (oy[:, None] - py), t_left, t_right)
+    cx, cy = px + t * dx, py + t * dy
+    best = np.argmin(np.where(ok, (cx - ox[:, None]) ** 2 + (cy - oy[:, None]) ** 2, np.inf), axis=1)[:, None]
+    vx = np.where(ok0, v0x, np.take_along_axis(cx, best, 1)[:, 0])
+    vy = np.where(ok0, v0y, np.take_along_axis(cy, best, 1)[:, 0])
+    return vx, vy, ok0 | ok.any(1)
+
+
+def _lp_direction(px, py, dx, dy, radius, ox, oy):
+    """2-D LP, direction mode (furthest along the unit vector o), loop-free: (vx, vy, feasible)."""
+    v0x, v0y = ox * radius, oy * radius
+    ok0 = (_violation(px, py, dx, dy, v0x[:, None], v0y[:, None]) <= 0.0).all(1)
+    t_left, t_right, ok = _intervals(px, py, dx, dy, radius)
+    t = np.where(ox[:, None] * dx + oy[:, None] * dy > 0.0, t_right, t_left)
+    cx, cy = px + t * dx, py + t * dy
+    best = np.argmax(np.where(ok, cx * ox[:, None] + cy * oy[:, None], -np.inf), axis=1)[:, None]
+    vx = np.where(ok0, v0x, np.take_along_axis(cx, best, 1)[:, 0])
+    vy = np.where(ok0, v0y, np.take_along_axis(cy, best, 1)[:, 0])
+    return vx, vy, ok0 | ok.any(1)
+
+
+def _lp_incremental(px, py, dx, dy, radius, ox, oy):
+    """``linearProgram2`` (closest mode) line by line for a few agents: (vx, vy, first failing line)."""
+    n, n_lines = px.shape
+    speed_sq = ox * ox + oy * oy
+    outside = speed_sq > radius * radius
+    norm = np.sqrt(np.where(outside, speed_sq, 1.0))
+    vx, vy = np.where(outside, ox / norm * radius, ox), np.where(outside, oy / norm * radius, oy)
+    fail = np.full(n, n_lines)
+    for i in range(n_lines):
+        rows = np.flatnonzero((fail == n_lines) & (_violation(px[:, i], py[:, i], dx[:, i], dy[:, i], vx, vy) > 0.0))
         if len(rows) == 0:
             continue
-        ok, new = _lp1(points, dirs, valid, i, radius, opt, rows, direction_opt)
-        result[rows[ok]] = new[ok]
+        sl = (rows, slice(0, i + 1))
+        t_left, t_right, ok = _intervals_prefix(px[sl], py[sl], dx[sl], dy[sl], radius[rows])
+        pxi, pyi, dxi, dyi = px[rows, i], py[rows, i], dx[rows, i], dy[rows, i]
+        t = np.clip(dxi * (ox[rows] - pxi) + dyi * (oy[rows] - pyi), t_left, t_right)
+        vx[rows] = np.where(ok, pxi + t * dxi, vx[rows])
+        vy[rows] = np.where(ok, pyi + t * dyi, vy[rows])
         fail[rows[~ok]] = i
-    return result, fail
+    return vx, vy, fail
 
 
-def _lp3_single(points, dirs, valid, begin, radius, result):
-    """linearProgram3 for one agent (rare: only agents whose 2-D LP failed)."""
-    distance = 0.0
-    order = [j for j in range(len(valid)) if valid[j]]
-    for pos, i in enumerate(order):
-        if i < begin:
+def _intervals_prefix(px, py, dx, dy, radius):
+    """``linearProgram1`` on the last line of (r, i + 1) arrays, bounded by the lines before it."""
+    pxi, pyi, dxi, dyi = px[:, -1:], py[:, -1:], dx[:, -1:], dy[:, -1:]
+    dot = pxi[:, 0] * dxi[:, 0] + pyi[:, 0] * dyi[:, 0]
+    disc = dot * dot + radius * radius - (pxi[:, 0] ** 2 + pyi[:, 0] ** 2)
+    sq = np.sqrt(np.maximum(disc, 0.0))
+    den = (dxi * dy - dyi * dx)[:, :-1]
+    num = (dx * (pyi - py) - dy * (pxi - px))[:, :-1]
+    par = np.abs(den) <= EPS
+    t = num / np.where(par, 1.0, den)
+    t_right = np.minimum(np.where(par | (den < 0.0), np.inf, t).min(1, initial=np.inf), sq - dot)
+    t_left = np.maximum(np.where(par | (den >= 0.0), -np.inf, t).max(1, initial=-np.inf), -sq - dot)
+    return t_left, t_right, (disc >= 0.0) & ~(par & (num < 0.0)).any(1) & (t_left <= t_right)
+
+
+def _lp3(px, py, dx, dy, projectable, n_obst, begin, radius, vx, vy):
+    """``linearProgram3`` for agents whose 2-D LP failed at line ``begin`` (r,), all together.
+
+    Obstacle lines (slots < n_obst) stay hard; each agent line j < i is replaced by the line where
+    breaking j and i costs the same. ``projectable`` (r, L) marks agent slots that hold real lines.
+    """
+    n_lines = px.shape[1]
+    distance = np.zeros(len(vx))
+    slots = np.arange(n_lines)
+    for i in range(int(begin.min()), n_lines):
+        viol = _violation(px[:, i], py[:, i], dx[:, i], dy[:, i], vx, vy)
+        rows = np.flatnonzero((i >= begin) & (viol > distance))
+        if len(rows) == 0:
             continue
-        p_i, d_i = points[i], dirs[i]
-        if _det(d_i, p_i - result) <= distance:
-            continue
-        proj_p, proj_d = [], []
-        for j in order[:pos]:
-            p_j, d_j = points[j], dirs[j]
-            det = _det(d_i, d_j)
-            if abs(det) <= EPS:
-                if float(d_i @ d_j) > 0.0:
-                    continue
-                point = 0.5 * (p_i + p_j)
-            else:
-                point = p_i + (_det(d_j, p_i - p_j) / det) * d_i
-            direction = d_j - d_i
-            direction = direction / max(np.linalg.norm(direction), 1e-300)
-            proj_p.append(point)
-            proj_d.append(direction)
-        temp = result
-        opt = np.array([-d_i[1], d_i[0]])
-        if proj_p:
-            pp, dd = np.array(proj_p)[None], np.array(proj_d)[None]
-            vv = np.ones((1, len(proj_p)), dtype=bool)
-            res, fail = _lp2(pp, dd, vv, np.array([radius]), opt[None], direction_opt=True)
-            result = temp if fail[0] >= 0 else res[0]
-        else:
-            result = opt * radius
-        distance = _det(d_i, p_i - result)
-    return result
+        pix, piy, dix, diy = px[rows, i : i + 1], py[rows, i : i + 1], dx[rows, i : i + 1], dy[rows, i : i + 1]
+        pjx, pjy, djx, djy = px[rows], py[rows], dx[rows], dy[rows]
+        det = dix * djy - diy * djx
+        par = np.abs(det) <= EPS
+        use = projectable[rows] & (slots >= n_obst) & (slots < i) & ~(par & (dix * djx + diy * djy > 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (djx * (piy - pjy) - djy * (pix - pjx)) / det
+            qx = np.where(par, 0.5 * (pix + pjx), pix + s * dix)
+            qy = np.where(par, 0.5 * (piy + pjy), piy + s * diy)
+            ex, ey = _normalised(djx - dix, djy - diy)
+        hard = slots < n_obst
+        lines = _fill(
+            np.where(hard, pjx, qx),
+            np.where(hard, pjy, qy),
+            np.where(hard, djx, ex),
+            np.where(hard, djy, ey),
+            hard | use,
+        )
+        nx, ny, ok = _lp_direction(*lines, radius[rows], -diy[:, 0], dix[:, 0])
+        vx[rows] = np.where(ok, nx, vx[rows])
+        vy[rows] = np.where(ok, ny, vy[rows])
+        distance[rows] = _violation(pix[:, 0], piy[:, 0], dix[:, 0], diy[:, 0], vx[rows], vy[rows])
+    return vx, vy
 
 
 def orca_step(
@@ -189,19 +581,56 @@ def orca_step(
     pref_velocities: np.ndarray,
     radii: np.ndarray,
     max_speeds: np.ndarray,
+    obstacles: ObstacleSet | None,
     params: OrcaParams,
 ) -> np.ndarray:
-    """New velocities (N, 2) for all agents: ORCA half-planes + 2-D LP (3-D LP where infeasible).
+    """New velocities of all agents for one step (RVO2's ``computeNeighbors`` + ``computeNewVelocity``).
 
     Args:
-        positions, velocities, pref_velocities: (N, 2) float64, m and m/s.
-        radii, max_speeds: (N,) float64, m and m/s.
+        positions: (N, 2) float64, m.
+        velocities: (N, 2) float64, m/s, the current velocities.
+        pref_velocities: (N, 2) float64, m/s, where each agent wants to go.
+        radii: (N,) float64, m.
+        max_speeds: (N,) float64, m/s.
+        obstacles: from :func:`build_obstacles`, or None.
+        params: shared ORCA parameters.
+
+    Returns:
+        (N, 2) float64 new velocities, m/s; the caller moves the agents (p += v dt, as RVO2).
     """
-    positions = np.asarray(positions, dtype=np.float64)
-    if len(positions) == 0:
-        return np.zeros((0, 2))
-    points, dirs, valid = agent_lines(positions, np.asarray(velocities, float), np.asarray(radii, float), params)
-    result, fail = _lp2(points, dirs, valid, np.asarray(max_speeds, float), np.asarray(pref_velocities, float))
-    for a in np.flatnonzero(fail >= 0):
-        result[a] = _lp3_single(points[a], dirs[a], valid[a], int(fail[a]), float(max_speeds[a]), result[a])
-    return result
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    vel = np.asarray(velocities, dtype=np.float64).reshape(-1, 2)
+    pref = np.asarray(pref_velocities, dtype=np.float64).reshape(-1, 2)
+    radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(pos),))
+    speeds = np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (len(pos),))
+    if not len(vel) == len(pref) == len(pos):
+        raise ValueError("orca_step: positions, velocities and pref_velocities must all be (N, 2)")
+    px, py, dx, dy, real, n_obst = orca_lines(pos, vel, radii, speeds, obstacles, params)
+    vx, vy, ok = _lp_closest(px, py, dx, dy, speeds, pref[:, 0], pref[:, 1])
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        sub = [a[bad] for a in (px, py, dx, dy)]
+        bx, by, fail = _lp_incremental(*sub, speeds[bad], pref[bad, 0], pref[bad, 1])
+        projectable = real[bad] & (np.arange(px.shape[1]) >= n_obst)
+        vx[bad], vy[bad] = _lp3(*sub, projectable, n_obst, fail, speeds[bad], bx, by)
+    return np.stack([vx, vy], axis=1)
+
+
+def orca_lines(positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams):
+    """All ORCA half-planes of all agents, in RVO2's order (obstacle lines, then agent lines).
+
+    A velocity v is allowed by line (p, d) when det(d, p - v) <= 0 (v on the left of d).
+
+    Returns:
+        ``(px, py, dx, dy, real, n_obst)``: (N, L) float64 points (m/s) and unit directions, (N, L)
+        bool marking slots that hold a line (the others hold an always-satisfied filler), and the
+        number of obstacle slots (they come first).
+    """
+    *agent, valid = _agent_lines(positions, velocities, radii, params)
+    obst = None
+    if obstacles is not None and obstacles.n_vertices and len(positions):
+        obst = _obstacle_lines(positions, velocities, radii, max_speeds, obstacles, params)
+    if obst is None:
+        return (*agent, valid, 0)
+    merged = [np.concatenate(pair, axis=1) for pair in zip(obst, (*agent, valid), strict=True)]
+    return (*merged, obst[0].shape[1])
