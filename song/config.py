@@ -85,6 +85,20 @@ class MotionConfig(_Section):
     height_max_m: float = Field(1.95, le=2.3, description="largest body height, m")
     contact_height_m: float = Field(0.05, gt=0.0, description="foot contact height threshold, m")
     contact_speed_mps: float = Field(0.2, gt=0.0, description="foot contact speed threshold, m/s")
+    smoothing_sigma_frames: float = Field(
+        1.0, ge=0.0, le=10.0, description="post-processing Gaussian smoothing of root and rotations, frames"
+    )
+    lock_blend_frames: int = Field(4, ge=0, le=15, description="foot-lock blend in/out around a contact, frames")
+    kimodo_model: str = Field("kimodo-soma-rp", description="Kimodo model name (short key or display name)")
+    kimodo_steps: int = Field(100, ge=1, le=1000, description="Kimodo DDIM denoising steps")
+    kimodo_batch_size: int = Field(16, ge=1, le=256, description="pedestrians per batched Kimodo call")
+    kimodo_max_frames: int = Field(
+        300, ge=30, le=2000, description="longest single Kimodo segment, frames; longer tracks use multi-prompt"
+    )
+    kimodo_postprocess: bool = Field(True, description="also run Kimodo's own foot-skate post-processing")
+    kimodo_embedding_cache: str = Field(
+        "", description="folder of cached prompt embeddings (empty: $SONG_KIMODO_EMBEDDINGS or ~/.cache/song)"
+    )
 
 
 class BindingConfig(_Section):

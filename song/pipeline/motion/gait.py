@@ -1,0 +1,422 @@
+"""Procedural gait: a footstep-planned, IK-driven walk that follows a planned root track exactly.
+
+How it works (DESIGN §5.3; issue #5):
+
+1. **Cadence and phase.** The step frequency follows the walk-ratio model ``f = √(v/WR)`` steps/s
+   (step length ``L = √(v·WR)``, so ``f·L = v``), floored at ``min_cadence_spm``. A gait phase ``s``
+   (one unit per step, two per stride) is integrated from ``f`` so it stays continuous through speed
+   changes. The left foot swings for ``s mod 2 ∈ [0, 0.8)`` and the right for ``[1, 1.8)``: each foot
+   is in stance 60 % of a stride and swings 40 %, with two double-support windows per stride.
+2. **Stopping, idling, turning on the spot.** The phase only rests in the middle of a double
+   support. While the pedestrian moves, turns faster than ``_TURN_RATE`` or has a foot away from its
+   neutral stance (translation or yaw), the phase advances; otherwise it freezes and the body idles
+   (breathing, slow weight shift, looking around) with both feet planted.
+3. **Footsteps.** When a foot lifts, its next stance is placed under the hip at the predicted
+   mid-stance time (read from the *planned* trajectory, so deceleration and stops are anticipated),
+   with the style's step width and toe-out. Stance feet never move (zero skating by construction);
+   they roll over the heel after touchdown and over the ball before lift-off.
+4. **Swing.** The ankle lifts first, then travels with a minimum-jerk profile, then lands; the foot
+   pitches from toe-down to toe-up.
+5. **Body.** The pelvis follows the plan with a small lateral sway and a vertical bob, lowered where
+   needed so both ankles stay reachable; pelvic rotation and list, counter-rotating thorax, lean
+   into turns (``atan(v·ω/g)``), counter-phase arm swing with forward-only elbow flexion, a
+   stabilised head. Legs are solved with two-bone IK (knee pole = foot forward), so knees never
+   hyper-extend.
+
+Per-pedestrian style (height, walk ratio, arm swing, posture, step width, toe-out, phase) is drawn
+from the pedestrian's seed, so a crowd does not walk in lockstep.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+
+from song.geometry.fk import global_to_local
+from song.geometry.ik import two_bone_ik
+from song.geometry.rotations import matrix_to_quat, quat_slerp, quat_to_matrix, rot_x, rot_y, rot_z, wrap_angle
+from song.geometry.skeleton import JOINT_INDEX as J
+from song.geometry.skeleton import rest_joints
+from song.pipeline.motion.types import Motion, Trajectory
+
+SWING = 0.8  # swing length in step units (40 % of a 2-step stride)
+REST_PHASE = 0.9  # the phase rests in the middle of a double support (s mod 1 = 0.9)
+_MOVE_SPEED = 0.08  # m/s: below this the plan is "standing"
+_TURN_RATE = 0.35  # rad/s: above this a standing pedestrian steps round (turning on the spot)
+_SETTLE_POS = 0.06  # m: a planted foot farther than this from its neutral spot triggers a step
+_SETTLE_YAW = 0.3  # rad: same for foot yaw
+_GRAVITY = 9.81
+# The foot lands under the hip 0.48 steps after touchdown (40 % into its 1.2-step stance), not at
+# mid-stance: heel-off at the end of stance lifts the ankle, so the leg reaches farther behind than ahead.
+_PLACE_AT = 0.48
+_TOE_OFF_DEG = 30.0  # foot pitch at lift-off (heel raised, rolling over the ball)
+_HEEL_STRIKE_DEG = 10.0  # foot pitch at touchdown (toes up)
+
+
+@dataclass(frozen=True)
+class GaitStyle:
+    """Per-pedestrian style, drawn from its seed (see :func:`sample_style`)."""
+
+    height_m: float
+    walk_ratio: float  # m·s
+    arm_swing: float  # scale of the arm-swing amplitude
+    elbow_flex_deg: float
+    lean_deg: float  # forward trunk lean
+    step_width: float  # fraction of the hip width between the feet centres
+    toe_out_deg: float
+    sway_m: float  # pelvis lateral sway amplitude at full walk
+    bob_m: float  # pelvis vertical bob amplitude at full walk
+    head_pitch_deg: float
+    start_phase: float  # 0.9 (left foot leads) or 1.9 (right foot leads)
+    idle_phase: float  # radians, offsets the idle weight shift
+
+    def to_json(self) -> dict:
+        return {k: round(v, 6) for k, v in asdict(self).items()}
+
+
+def sample_style(
+    rng: np.random.Generator, height_range: tuple[float, float] = (1.5, 1.95), walk_ratio: float = 0.38
+) -> GaitStyle:
+    """Draw a style. Heights: normal(1.71 m, 0.09 m) clipped to ``height_range``; WR within ±5 %."""
+    lo, hi = height_range
+    return GaitStyle(
+        height_m=float(np.clip(rng.normal(1.71, 0.09), lo, hi)),
+        walk_ratio=float(walk_ratio * rng.uniform(0.95, 1.05)),
+        arm_swing=float(rng.uniform(0.7, 1.3)),
+        elbow_flex_deg=float(rng.uniform(8.0, 20.0)),
+        lean_deg=float(rng.uniform(1.0, 5.0)),
+        step_width=float(rng.uniform(0.75, 1.05)),
+        toe_out_deg=float(rng.uniform(3.0, 11.0)),
+        sway_m=float(rng.uniform(0.008, 0.014)),
+        bob_m=float(rng.uniform(0.012, 0.022)),
+        head_pitch_deg=float(rng.uniform(-4.0, 6.0)),
+        start_phase=float(REST_PHASE + rng.integers(0, 2)),
+        idle_phase=float(rng.uniform(0.0, 2 * np.pi)),
+    )
+
+
+def cadence_steps_per_s(speed: np.ndarray, walk_ratio: float, min_cadence_spm: float) -> np.ndarray:
+    """Walk-ratio cadence ``max(√(v/WR), f_min)`` in steps/s for speeds ``(...)`` m/s."""
+    return np.maximum(np.sqrt(np.maximum(speed, 0.0) / walk_ratio), min_cadence_spm / 60.0)
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def _min_jerk(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+
+
+@dataclass
+class _Plan:
+    """Smoothed plan signals at the trajectory's frames."""
+
+    t: np.ndarray
+    xy: np.ndarray
+    heading: np.ndarray  # unwrapped, smoothed
+    speed: np.ndarray
+    yaw_rate: np.ndarray
+    walk: np.ndarray  # 0 standing … 1 walking (smooth)
+
+    def pose_at(self, time: float) -> tuple[float, float, float]:
+        x = float(np.interp(time, self.t, self.xy[:, 0]))
+        y = float(np.interp(time, self.t, self.xy[:, 1]))
+        return x, y, float(np.interp(time, self.t, self.heading))
+
+
+def _plan_signals(traj: Trajectory) -> _Plan:
+    t = traj.t
+    dt = 1.0 / traj.fps
+    heading = gaussian_filter1d(np.unwrap(traj.yaw), 2.0, mode="nearest")
+    if len(t) > 1:
+        vel = np.gradient(traj.xy, t, axis=0)
+        speed = gaussian_filter1d(np.linalg.norm(vel, axis=1), 2.0, mode="nearest")
+        yaw_rate = gaussian_filter1d(np.gradient(heading, t), 2.0, mode="nearest")
+    else:
+        speed = np.zeros(1)
+        yaw_rate = np.zeros(1)
+    walk = gaussian_filter1d(np.clip(speed / 0.6, 0.0, 1.0), 0.25 / dt, mode="nearest")
+    return _Plan(t=t, xy=traj.xy, heading=heading, speed=speed, yaw_rate=yaw_rate, walk=walk)
+
+
+def _integrate_phase(
+    plan: _Plan, style: GaitStyle, half_width: float, min_cadence_spm: float
+) -> tuple[np.ndarray, dict[int, dict[int, tuple[float, float, float]]]]:
+    """Phase per frame and the stance placements ``{foot: {index: (x, y, yaw)}}`` (0 left, 1 right).
+
+    A plain loop over frames with Python floats (a few operations per frame): the only sequential
+    part of the generator.
+    """
+    t, n = plan.t, len(plan.t)
+    side = (1.0, -1.0)
+    toe_out = math.radians(style.toe_out_deg)
+    cadence = cadence_steps_per_s(plan.speed, style.walk_ratio, min_cadence_spm).tolist()
+    moving = ((plan.speed > _MOVE_SPEED) | (np.abs(plan.yaw_rate) > _TURN_RATE)).tolist()
+    xs, ys, hs, ts = plan.xy[:, 0].tolist(), plan.xy[:, 1].tolist(), plan.heading.tolist(), t.tolist()
+
+    def neutral(foot: int, x: float, y: float, h: float) -> tuple[float, float, float]:
+        s = side[foot]
+        return (x - s * half_width * math.sin(h), y + s * half_width * math.cos(h), h + s * toe_out)
+
+    def off(foot: int, i: int) -> bool:
+        px, py, ph = stance[foot][last[foot]]
+        nx, ny, nh = neutral(foot, xs[i], ys[i], hs[i])
+        dyaw = (ph - nh + math.pi) % (2 * math.pi) - math.pi
+        return math.hypot(px - nx, py - ny) > _SETTLE_POS or abs(dyaw) > _SETTLE_YAW
+
+    s = style.start_phase
+    last = [math.floor(s / 2.0), math.floor((s - 1.0) / 2.0)]
+    stance = {f: {last[f]: neutral(f, xs[0], ys[0], hs[0])} for f in (0, 1)}
+    phase = np.empty(n)
+    frozen = True
+    for i in range(n):
+        phase[i] = s
+        if i == n - 1:
+            break
+        if frozen:
+            if not (moving[i] or off(0, i) or off(1, i)):
+                continue
+            frozen = False
+        rate = cadence[i]
+        dt = ts[i + 1] - ts[i]
+        s_new = s + rate * dt
+        k = math.floor(s) + 1  # next integer phase: a lift-off
+        while k <= s_new:
+            foot = k % 2
+            lift_time = ts[i] + (k - s) / rate
+            x, y, h = plan.pose_at(lift_time + (SWING + _PLACE_AT) / rate)
+            index = (k - foot) // 2
+            stance[foot][index] = neutral(foot, x, y, h)
+            last[foot] = index
+            k += 1
+        rest = math.floor(s - REST_PHASE) + 1 + REST_PHASE  # next resting point
+        if rest <= s_new and not (moving[i + 1] or off(0, i + 1) or off(1, i + 1)):
+            s_new, frozen = rest, True
+        s = s_new
+    return phase, stance
+
+
+def _stance_arrays(stance: dict[int, tuple[float, float, float]]) -> tuple[int, np.ndarray]:
+    lo, hi = min(stance), max(stance)
+    out = np.empty((hi - lo + 1, 3))
+    previous = stance[lo]
+    for j in range(lo, hi + 1):
+        previous = stance.get(j, previous)
+        out[j - lo] = previous
+    return lo, out
+
+
+class _Body:
+    """Rest-skeleton quantities of one body height."""
+
+    def __init__(self, height: float) -> None:
+        self.height = height
+        self.rest = rest_joints(height)
+        r = self.rest
+        self.ankle_off = r[J["left_ankle"]] - r[J["left_foot"]]  # ankle from ball of foot (left)
+        self.heel = np.array([r[J["left_ankle"], 0] - 0.03 * height, 0.0, 0.0])  # heel point x, on floor
+        self.ankle_h = float(r[J["left_ankle"], 2])
+        self.half_width = float(r[J["left_hip"], 1])
+        self.leg = float(
+            np.linalg.norm(r[J["left_knee"]] - r[J["left_hip"]])
+            + np.linalg.norm(r[J["left_ankle"]] - r[J["left_knee"]])
+        )
+
+
+def _foot_poses(
+    body: _Body, phase_foot: np.ndarray, walk: np.ndarray, lo: int, placements: np.ndarray, side: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Ankle targets ``(T, 3)``, foot yaw ``(T,)``, pitch ``(T,)`` and stance flags ``(T,)`` of one foot."""
+    j = np.floor(phase_foot / 2.0).astype(np.int64)
+    u = phase_foot - 2.0 * j
+    in_swing = u < SWING
+    cur = placements[np.clip(j - lo, 0, len(placements) - 1)]
+    prev = placements[np.clip(j - 1 - lo, 0, len(placements) - 1)]
+    h_scale = body.height / 1.75
+    beta_off, beta_on = np.radians(_TOE_OFF_DEG) * walk, np.radians(_HEEL_STRIKE_DEG) * walk
+
+    def pose(anchor_xy: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, pivot: str) -> np.ndarray:
+        # ankle position for a foot planted at anchor (flat-foot ankle xy), rotated by pitch about a pivot
+        cos, sin = np.cos(yaw), np.sin(yaw)
+        if pivot == "toe":
+            off_flat = -body.ankle_off  # toe from ankle, flat
+            piv_local = np.array([off_flat[0], 0.0, off_flat[2]])
+        else:
+            piv_local = np.array([body.heel[0] - body.rest[J["left_ankle"], 0], 0.0, -body.ankle_h])
+        arm = -piv_local  # pivot → ankle, in the foot frame before pitch
+        cp, sp = np.cos(pitch), np.sin(pitch)
+        ax = arm[0] * cp + arm[2] * sp
+        az = -arm[0] * sp + arm[2] * cp
+        px = anchor_xy[:, 0] + piv_local[0] * cos
+        py = anchor_xy[:, 1] + piv_local[0] * sin
+        return np.stack([px + ax * cos, py + ax * sin, body.ankle_h + piv_local[2] + az], axis=-1)
+
+    tau = np.clip((u - SWING) / (2.0 - SWING), 0.0, 1.0)
+    stance_pitch = beta_off * _smoothstep((tau - 0.45) / 0.55) - beta_on * (1.0 - _smoothstep(tau / 0.15))
+    heel_phase = tau < 0.3
+    stance_pos = np.where(
+        heel_phase[:, None],
+        pose(cur[:, :2], cur[:, 2], np.minimum(stance_pitch, 0.0), "heel"),
+        pose(cur[:, :2], cur[:, 2], np.maximum(stance_pitch, 0.0), "toe"),
+    )
+    sigma = np.clip(u / SWING, 0.0, 1.0)
+    start = pose(prev[:, :2], prev[:, 2], beta_off, "toe")
+    end = pose(cur[:, :2], cur[:, 2], -beta_on, "heel")
+    progress = _min_jerk((sigma - 0.06) / 0.88)
+    distance = np.linalg.norm(end[:, :2] - start[:, :2], axis=1)
+    lift = np.clip(0.05 + 0.05 * distance, 0.05, 0.09) * h_scale
+    bump = _smoothstep(sigma / 0.25) * _smoothstep((1.0 - sigma) / 0.3)
+    swing_pos = start + (end - start) * progress[:, None]
+    swing_pos[:, 2] = start[:, 2] + (end[:, 2] - start[:, 2]) * sigma + lift * bump
+    swing_yaw = prev[:, 2] + wrap_angle(cur[:, 2] - prev[:, 2]) * progress
+    swing_pitch = beta_off + (-beta_on - beta_off) * _smoothstep(sigma)
+    ankle = np.where(in_swing[:, None], swing_pos, stance_pos)
+    yaw = np.where(in_swing, swing_yaw, cur[:, 2])
+    pitch = np.where(in_swing, swing_pitch, stance_pitch)
+    del side
+    return ankle, yaw, pitch, ~in_swing
+
+
+def _slerp_matrix(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
+    return quat_to_matrix(quat_slerp(matrix_to_quat(a), matrix_to_quat(b), w))
+
+
+def _lowered_pelvis(
+    z_nominal: np.ndarray, hips: list[np.ndarray], ankles: list[np.ndarray], pelvis_z: np.ndarray, reach: np.ndarray
+) -> np.ndarray:
+    """Pelvis heights ≤ nominal that keep both ankle targets within ``reach`` of their hips, smoothed.
+
+    The cap is eroded (minimum filter) before a Gaussian of the same radius, so the smoothed curve
+    stays below the cap at every frame.
+    """
+    cap = z_nominal.copy()
+    for hip, ankle in zip(hips, ankles, strict=True):
+        horizontal = np.linalg.norm(ankle[:, :2] - hip[:, :2], axis=1)
+        vertical = np.sqrt(np.maximum(reach * reach - horizontal * horizontal, (0.5 * reach) ** 2))
+        cap = np.minimum(cap, ankle[:, 2] + vertical - (hip[:, 2] - pelvis_z))
+    radius = 4
+    if len(cap) > 1:
+        cap = minimum_filter1d(cap, 2 * radius + 1, mode="nearest")
+        cap = gaussian_filter1d(cap, radius / 2.0, mode="nearest", truncate=2.0)
+    return cap
+
+
+def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 85.0) -> Motion:
+    """Procedural full-body walk that follows ``traj`` (see the module docstring).
+
+    Args:
+        traj: the planned root track (30 FPS, world frame).
+        style: per-pedestrian style (height, walk ratio, ...).
+        min_cadence_spm: cadence floor, steps/min.
+
+    Returns:
+        A :class:`Motion` at the trajectory's time stamps, with stance flags as ``contacts``.
+    """
+    body = _Body(style.height_m)
+    rest = body.rest
+    plan = _plan_signals(traj)
+    n = traj.n_frames
+    h_scale = style.height_m / 1.75
+    phase, stance = _integrate_phase(plan, style, body.half_width * style.step_width, min_cadence_spm)
+    walk, heading, speed, t = plan.walk, plan.heading, plan.speed, traj.t
+
+    ankles, foot_rots, contacts, poles = [], [], [], []
+    for foot, side in ((0, 1.0), (1, -1.0)):
+        lo, placements = _stance_arrays(stance[foot])
+        ankle, yaw, pitch, planted = _foot_poses(body, phase - foot, walk, lo, placements, side)
+        ankles.append(ankle)
+        foot_rots.append(rot_z(yaw) @ rot_y(pitch))
+        contacts.append(planted)
+        poles.append(np.stack([np.cos(yaw), np.sin(yaw), np.zeros(n)], axis=-1))
+
+    # pelvis: sway, bob, rotation, list; lean into turns
+    left = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+    idle = 1.0 - walk
+    sway = walk * style.sway_m * np.cos(np.pi * (phase - 1.4)) + idle * 0.008 * np.sin(
+        2 * np.pi * 0.1 * t + style.idle_phase
+    )
+    yaw_osc = -walk * np.radians(4.0) * np.cos(np.pi * (phase - 0.8))
+    pelvic_list = walk * np.radians(3.0) * np.cos(np.pi * (phase - 1.4))
+    turn_roll = -np.clip(0.8 * np.arctan(speed * plan.yaw_rate / _GRAVITY), -0.17, 0.17)
+    lean = np.radians(style.lean_deg)
+    rot_pelvis = rot_z(heading + yaw_osc) @ rot_x(pelvic_list + 0.3 * turn_roll) @ rot_y(0.3 * lean * walk)
+    pelvis = np.empty((n, 3))
+    pelvis[:, :2] = traj.xy + sway[:, None] * left
+    breathing = np.sin(2 * np.pi * 0.25 * t + style.idle_phase)
+    z_nominal = rest[0, 2] - walk * 0.025 * h_scale + walk * style.bob_m * np.cos(2 * np.pi * (phase - 1.4))
+    z_nominal = z_nominal + idle * 0.002 * breathing
+    hip_offsets = [rot_pelvis @ (rest[J[name]] - rest[0]) for name in ("left_hip", "right_hip")]
+    pelvis[:, 2] = z_nominal
+    hips = [pelvis + off for off in hip_offsets]
+    pelvis[:, 2] = _lowered_pelvis(z_nominal, hips, ankles, z_nominal, body.leg * (0.995 - 0.01 * walk))
+    hips = [pelvis + off for off in hip_offsets]
+
+    glob = np.broadcast_to(np.eye(3), (n, 24, 3, 3)).copy()
+    glob[:, 0] = rot_pelvis
+    pelvis_fwd = rot_pelvis[:, :, 0]
+    for (hip_name, knee_name, ankle_name, foot_name), hip, ankle, rot_foot, pole in zip(
+        (
+            ("left_hip", "left_knee", "left_ankle", "left_foot"),
+            ("right_hip", "right_knee", "right_ankle", "right_foot"),
+        ),
+        hips,
+        ankles,
+        foot_rots,
+        poles,
+        strict=True,
+    ):
+        knee_rest = hip + rest[J[knee_name]] - rest[J[hip_name]]
+        ankle_rest = hip + rest[J[ankle_name]] - rest[J[hip_name]]
+        bend_pole = pole + pelvis_fwd
+        _, _, thigh, shin = two_bone_ik(hip, knee_rest, ankle_rest, ankle, bend_pole, np.array([1.0, 0.0, 0.0]))
+        glob[:, J[hip_name]] = thigh
+        glob[:, J[knee_name]] = shin
+        glob[:, J[ankle_name]] = rot_foot
+        glob[:, J[foot_name]] = rot_foot
+
+    # trunk, head, arms
+    chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
+    rot_chest = rot_z(heading - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
+    for name, w in (("spine1", 1 / 3), ("spine2", 2 / 3)):
+        glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
+    glob[:, J["spine3"]] = rot_chest
+    look = (
+        heading
+        + np.clip(0.3 * plan.yaw_rate, -0.4, 0.4)
+        + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
+    )
+    rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(np.full(n, np.radians(style.head_pitch_deg)))
+    glob[:, J["head"]] = rot_head
+    glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)
+    glob[:, J["left_collar"]] = rot_chest
+    glob[:, J["right_collar"]] = rot_chest
+    amplitude = np.radians(style.arm_swing * (4.0 + 10.0 * np.clip(speed, 0.0, 1.5)))
+    swing_left = walk * amplitude * np.cos(np.pi * (phase - 1.8))
+    hang = np.radians(82.0)
+    for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
+        shoulder = rot_chest @ rot_y(-swing) @ rot_x(np.full(n, sign * hang))
+        flex = np.radians(style.elbow_flex_deg) + 0.5 * np.maximum(swing, 0.0)
+        elbow = shoulder @ rot_z(sign * flex)
+        glob[:, J[f"{prefix}_shoulder"]] = shoulder
+        glob[:, J[f"{prefix}_elbow"]] = elbow
+        glob[:, J[f"{prefix}_wrist"]] = elbow
+        glob[:, J[f"{prefix}_hand"]] = elbow
+
+    local_quats = matrix_to_quat(global_to_local(glob))
+    return Motion(
+        ped_id=traj.ped_id,
+        t=traj.t.copy(),
+        frame=traj.frame.astype(np.int32),
+        height_m=style.height_m,
+        rest_joints=rest,
+        local_quats=local_quats,
+        root_pos=pelvis,
+        contacts=np.stack(contacts, axis=-1),
+        info={"style": style.to_json()},
+    )

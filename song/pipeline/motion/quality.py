@@ -1,0 +1,132 @@
+"""Motion quality figures (issue #5 targets), per pedestrian, written into ``meta.json``.
+
+Definitions:
+
+- **Foot-skating ratio** (GMD): a frame skates when, for either foot, the toe (ball-of-foot joint) is
+  below 5 cm in this and the next frame and its horizontal speed exceeds 0.5 m/s both instantly and
+  as a centred 5-frame mean; the ratio is skating frames over all frames.
+- **Sole gap**: height of a foot joint above its rest height (ankle, ball of foot); the lowest of a
+  foot's two is that foot's sole gap. *Penetration* is ``max(0, −min gap)`` over both feet;
+  *floating* is a contact-frame sole gap above zero.
+- **Root error**: horizontal distance between the pelvis and the planned trajectory.
+- **Cadence**: steps/s measured from consecutive touchdowns of the same foot (``2 / period``),
+  compared with the walk-ratio model at the planned mean speed over that stride; only strides where
+  the plan walks steadily (speed > 0.3 m/s throughout) count.
+- **Joint limits**: knee flexion is the angle of the knee's local rotation about the body's lateral
+  axis (+y), positive when the shin folds backwards; elbow flexion is about −z (left) / +z (right),
+  positive when the forearm folds forwards. Hyper-extension is a negative angle.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+
+from song.geometry.rotations import quat_to_axis_angle
+from song.geometry.skeleton import JOINT_INDEX as J
+
+TOES = (J["left_foot"], J["right_foot"])
+ANKLES = (J["left_ankle"], J["right_ankle"])
+SKATE_HEIGHT_M = 0.05
+SKATE_SPEED_MPS = 0.5
+
+
+def foot_skating_ratio(joints: np.ndarray, fps: float) -> float:
+    """GMD foot-skating ratio of world joints ``(T, 24, 3)`` (see the module docstring)."""
+    n = len(joints)
+    if n < 2:
+        return 0.0
+    skating = np.zeros(n - 1, dtype=bool)
+    for toe in TOES:
+        p = joints[:, toe]
+        low = (p[:-1, 2] < SKATE_HEIGHT_M) & (p[1:, 2] < SKATE_HEIGHT_M)
+        speed = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1) * fps
+        mean5 = uniform_filter1d(speed, 5, mode="nearest")
+        skating |= low & (speed > SKATE_SPEED_MPS) & (mean5 > SKATE_SPEED_MPS)
+    return float(skating.sum() / n)
+
+
+def sole_gaps(joints: np.ndarray, rest_joints: np.ndarray) -> np.ndarray:
+    """Per-foot sole gaps ``(T, 2)`` metres: min over (ankle, ball) of height above its rest height."""
+    gaps = []
+    for ankle, toe in zip(ANKLES, TOES, strict=True):
+        gaps.append(np.minimum(joints[:, ankle, 2] - rest_joints[ankle, 2], joints[:, toe, 2] - rest_joints[toe, 2]))
+    return np.stack(gaps, axis=-1)
+
+
+def knee_elbow_flexion(local_quats: np.ndarray) -> dict[str, np.ndarray]:
+    """Flexion angles (radians, ``(T, 2)`` left/right) of knees and elbows from local rotations."""
+    aa = quat_to_axis_angle(local_quats)
+    knee = aa[:, [J["left_knee"], J["right_knee"]], 1]
+    elbow = np.stack([-aa[:, J["left_elbow"], 2], aa[:, J["right_elbow"], 2]], axis=-1)
+    return {"knee": knee, "elbow": elbow}
+
+
+def cadence_errors(
+    contacts: np.ndarray, t: np.ndarray, plan_speed: np.ndarray, walk_ratio: float, min_cadence_spm: float
+) -> np.ndarray:
+    """Relative cadence errors ``(S,)`` of the steady strides (see the module docstring)."""
+    errors = []
+    for foot in range(contacts.shape[1]):
+        c = contacts[:, foot]
+        onsets = np.flatnonzero(c[1:] & ~c[:-1]) + 1
+        for a, b in zip(onsets[:-1], onsets[1:], strict=True):
+            v = plan_speed[a : b + 1]
+            if len(v) == 0 or v.min() < 0.3:
+                continue
+            measured = 2.0 / (t[b] - t[a])
+            model = max(np.sqrt(v.mean() / walk_ratio), min_cadence_spm / 60.0)
+            errors.append(measured / model - 1.0)
+    return np.asarray(errors, dtype=np.float64)
+
+
+def motion_quality(
+    joints: np.ndarray,
+    local_quats: np.ndarray,
+    rest_joints: np.ndarray,
+    contacts: np.ndarray,
+    t: np.ndarray,
+    plan_xy: np.ndarray,
+    plan_speed: np.ndarray,
+    walk_ratio: float,
+    min_cadence_spm: float,
+) -> dict[str, Any]:
+    """All quality figures of one motion as a JSON-ready dict (metres, degrees, ratios).
+
+    Args:
+        joints: ``(T, 24, 3)`` world joints; local_quats: ``(T, 24, 4)``; rest_joints: ``(24, 3)``.
+        contacts: ``(T, 2)`` bool; t: ``(T,)`` s; plan_xy: ``(T, 2)`` m; plan_speed: ``(T,)`` m/s.
+        walk_ratio, min_cadence_spm: the cadence model's parameters.
+    """
+    fps = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 30.0
+    gaps = sole_gaps(joints, rest_joints)
+    lowest = gaps.min(axis=1)
+    penetration = np.maximum(0.0, -lowest)
+    contact_gaps = gaps[contacts]
+    root_error = np.linalg.norm(joints[:, 0, :2] - plan_xy, axis=1)
+    cadence = cadence_errors(contacts, t, plan_speed, walk_ratio, min_cadence_spm)
+    flex = knee_elbow_flexion(local_quats)
+
+    def r(x: float, digits: int = 5) -> float:
+        return round(float(x), digits)
+
+    return {
+        "n_frames": int(len(t)),
+        "foot_skating_ratio": r(foot_skating_ratio(joints, fps)),
+        "penetration_p99_m": r(np.percentile(penetration, 99)),
+        "penetration_max_m": r(penetration.max()),
+        "contact_float_max_m": r(contact_gaps.max() if contact_gaps.size else 0.0),
+        "contact_float_p99_m": r(np.percentile(contact_gaps, 99) if contact_gaps.size else 0.0),
+        "root_error_mean_m": r(root_error.mean()),
+        "root_error_max_m": r(root_error.max()),
+        "contact_fraction": r(contacts.mean(), 4),
+        "cadence_strides": int(cadence.size),
+        "cadence_error_median": r(np.median(np.abs(cadence)) if cadence.size else 0.0, 4),
+        "cadence_error_max": r(np.abs(cadence).max() if cadence.size else 0.0, 4),
+        "knee_flexion_min_deg": r(np.degrees(flex["knee"].min()), 3),
+        "knee_flexion_max_deg": r(np.degrees(flex["knee"].max()), 3),
+        "elbow_flexion_min_deg": r(np.degrees(flex["elbow"].min()), 3),
+        "elbow_flexion_max_deg": r(np.degrees(flex["elbow"].max()), 3),
+    }

@@ -1,0 +1,95 @@
+"""Motion-stage data types: a planned root trajectory in, a skeletal motion out (DESIGN §5.3)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from song.errors import InputError
+from song.geometry.fk import forward_kinematics
+
+FPS = 30.0
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """One pedestrian's planned root track (a slice of ``crowd.parquet``).
+
+    Attributes:
+        ped_id: pedestrian id.
+        t: ``(T,)`` float64 seconds, strictly increasing.
+        frame: ``(T,)`` int32 frame numbers (``t = frame / fps``).
+        xy: ``(T, 2)`` float64 world positions, metres.
+        yaw: ``(T,)`` float64 heading, radians CCW from +x.
+        speed: ``(T,)`` float64 planned speed, m/s.
+    """
+
+    ped_id: int
+    t: np.ndarray
+    frame: np.ndarray
+    xy: np.ndarray
+    yaw: np.ndarray
+    speed: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.t)
+        if n < 1 or self.xy.shape != (n, 2) or self.yaw.shape != (n,) or self.speed.shape != (n,):
+            raise InputError("crowd.parquet", f"ped_id={self.ped_id}", "inconsistent trajectory arrays")
+        if n > 1 and not np.all(np.diff(self.t) > 0):
+            raise InputError("crowd.parquet", f"ped_id={self.ped_id}.t", "times must be strictly increasing")
+        if not (np.all(np.isfinite(self.xy)) and np.all(np.isfinite(self.yaw))):
+            raise InputError("crowd.parquet", f"ped_id={self.ped_id}", "non-finite x, y or yaw")
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.t)
+
+    @property
+    def fps(self) -> float:
+        """Frame rate from the time stamps (30 when there is a single frame)."""
+        if len(self.t) < 2:
+            return FPS
+        return float(round(1.0 / np.median(np.diff(self.t)), 6))
+
+
+@dataclass
+class Motion:
+    """A pedestrian's full-body motion on the 24-joint skeleton (world frame, Z up, metres).
+
+    Attributes:
+        ped_id: pedestrian id.
+        t: ``(T,)`` float64 seconds.
+        frame: ``(T,)`` int32 frame numbers.
+        height_m: body height, m.
+        rest_joints: ``(24, 3)`` float64 rest T-pose of this body (body frame x fwd, y left, z up).
+        local_quats: ``(T, 24, 4)`` float64 wxyz parent-local rotations relative to the rest pose; the
+            root's includes the world heading.
+        root_pos: ``(T, 3)`` float64 world pelvis positions, m.
+        contacts: ``(T, 2)`` bool (left, right foot) or ``None`` before detection.
+        info: provenance (generator, model, seed, prompt, style, fallback) and later quality figures.
+    """
+
+    ped_id: int
+    t: np.ndarray
+    frame: np.ndarray
+    height_m: float
+    rest_joints: np.ndarray
+    local_quats: np.ndarray
+    root_pos: np.ndarray
+    contacts: np.ndarray | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.t)
+
+    def fk(self) -> tuple[np.ndarray, np.ndarray]:
+        """World joints ``(T, 24, 3)`` and global rotations ``(T, 24, 3, 3)``."""
+        return forward_kinematics(self.rest_joints, self.local_quats, self.root_pos)
+
+    @property
+    def joints(self) -> np.ndarray:
+        """World joint positions ``(T, 24, 3)`` float64, metres."""
+        return self.fk()[0]

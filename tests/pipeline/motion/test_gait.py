@@ -1,0 +1,143 @@
+"""Procedural gait on synthetic plans: the issue's quality targets as assertions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from song.config import MotionConfig
+from song.geometry.rotations import quat_to_matrix, wrap_angle, yaw_of_matrix
+from song.geometry.skeleton import JOINT_INDEX as J
+from song.pipeline.motion import ProceduralGait
+from song.pipeline.motion._reference import foot_skating_reference
+from song.pipeline.motion.gait import cadence_steps_per_s, generate_gait, sample_style
+from song.pipeline.motion.postprocess import postprocess
+from song.pipeline.motion.quality import foot_skating_ratio, motion_quality
+from song.pipeline.motion.synthetic import synthetic_trajectories, trajectory_from_profiles
+
+CFG = MotionConfig()
+PLANS = synthetic_trajectories(10.0)
+
+
+@pytest.fixture(scope="module")
+def results():
+    out = {}
+    gen = ProceduralGait(CFG)
+    for name, traj in PLANS.items():
+        raw = gen.generate([traj], [""], [traj.ped_id + 100])[0]
+        final, figures = postprocess(raw, traj)
+        quality = motion_quality(
+            final.joints,
+            final.local_quats,
+            final.rest_joints,
+            final.contacts,
+            final.t,
+            traj.xy,
+            traj.speed,
+            CFG.walk_ratio_m_s,
+            CFG.min_cadence_spm,
+        )
+        out[name] = (traj, raw, final, quality)
+    return out
+
+
+@pytest.mark.parametrize("name", list(PLANS))
+def test_quality_targets(results, name):
+    _, _, _, q = results[name]
+    assert q["foot_skating_ratio"] <= 0.02
+    assert q["penetration_p99_m"] <= 0.01
+    assert q["contact_float_max_m"] <= 0.02
+    assert q["root_error_mean_m"] <= 0.02 and q["root_error_max_m"] <= 0.05
+    assert q["knee_flexion_min_deg"] >= -1.0  # never hyper-extends
+    assert q["elbow_flexion_min_deg"] >= 0.0  # elbows bend one way
+    assert q["cadence_error_max"] <= 0.10
+
+
+def test_cadence_follows_walk_ratio_model(results):
+    for name in ("straight_0.5", "straight_1.0", "straight_1.4"):
+        traj, raw, _, q = results[name]
+        assert q["cadence_strides"] >= 5
+        speed = float(name.split("_")[1])
+        expected = cadence_steps_per_s(np.array(speed), CFG.walk_ratio_m_s, CFG.min_cadence_spm)
+        steady = traj.t > 2.0
+        onsets = np.flatnonzero(raw.contacts[1:, 0] & ~raw.contacts[:-1, 0] & steady[1:]) + 1
+        measured = 2.0 / np.median(np.diff(traj.t[onsets]))
+        assert abs(measured / expected - 1) < 0.06
+    assert cadence_steps_per_s(np.array(0.3), 0.38, 85.0) == pytest.approx(85 / 60)
+
+
+def test_stance_is_sixty_percent_when_walking(results):
+    traj, raw, _, _ = results["straight_1.0"]
+    steady = traj.t > 2.0
+    assert raw.contacts[steady].mean() == pytest.approx(0.6, abs=0.04)
+    # single support alternates: never both feet in the air
+    assert raw.contacts.any(axis=1).all()
+
+
+def test_standing_idles_with_both_feet_planted(results):
+    traj, raw, final, _ = results["standing"]
+    joints = final.joints
+    assert raw.contacts.all()
+    for toe in (J["left_foot"], J["right_foot"]):
+        assert np.ptp(joints[:, toe, :2], axis=0).max() < 1e-3
+    # but the body is not frozen: breathing / look-around move the head a little
+    assert np.ptp(joints[:, J["head"]], axis=0).max() > 0.002
+
+
+def test_turning_on_the_spot_steps_round(results):
+    traj, raw, final, _ = results["turn_on_spot"]
+    joints = final.joints
+    assert np.linalg.norm(final.root_pos[:, :2] - traj.xy, axis=1).max() < 0.03
+    heading = yaw_of_matrix(quat_to_matrix(final.local_quats[:, 0]))
+    assert np.abs(wrap_angle(heading[-1] - traj.yaw[-1])) < np.radians(10)
+    # the feet turned with the body: foot direction (ankle → ball) follows the final heading
+    foot = joints[-1, J["left_foot"], :2] - joints[-1, J["left_ankle"], :2]
+    assert np.abs(wrap_angle(np.arctan2(foot[1], foot[0]) - traj.yaw[-1])) < np.radians(25)
+    assert (~raw.contacts).any()  # it did step
+
+
+def test_phase_is_continuous_and_motion_smooth(results):
+    for name in ("stop_and_go", "walk_then_stop", "curve"):
+        _, raw, _, _ = results[name]
+        joints = raw.joints
+        step = np.linalg.norm(np.diff(joints, axis=0), axis=-1).max()
+        assert step < 0.2  # no jumps: nothing faster than 6 m/s (a swinging toe peaks near 5× walking speed)
+
+
+def test_same_seed_same_bytes_and_styles_differ():
+    traj = PLANS["curve"]
+    gen = ProceduralGait(CFG)
+    a = gen.generate([traj], [""], [5])[0]
+    b = gen.generate([traj], [""], [5])[0]
+    c = gen.generate([traj], [""], [6])[0]
+    assert a.local_quats.tobytes() == b.local_quats.tobytes()
+    assert a.root_pos.tobytes() == b.root_pos.tobytes()
+    assert np.abs(a.joints - c.joints).max() > 0.01
+
+
+def test_heights_are_seeded_within_range():
+    heights = [sample_style(np.random.default_rng(s)).height_m for s in range(300)]
+    assert min(heights) >= 1.5 and max(heights) <= 1.95
+    assert np.std(heights) > 0.05
+
+
+def test_skating_metric_matches_twin_and_detects_sliding():
+    traj = PLANS["straight_1.0"]
+    motion = generate_gait(traj, sample_style(np.random.default_rng(1)))
+    joints = motion.joints
+    assert foot_skating_ratio(joints, 30.0) == pytest.approx(foot_skating_reference(joints, 30.0))
+    sliding = joints.copy()
+    sliding[:, J["left_foot"], 2] = 0.02
+    sliding[:, J["left_foot"], 0] = np.arange(len(joints)) * 0.04  # 1.2 m/s on the floor
+    ratio = foot_skating_ratio(sliding, 30.0)
+    assert ratio > 0.9 and ratio == pytest.approx(foot_skating_reference(sliding, 30.0))
+
+
+def test_single_frame_and_reverse_heading():
+    traj = trajectory_from_profiles(3, np.zeros(1), np.zeros(1), start=(0.0, 0.0, 2.0))
+    motion = ProceduralGait(CFG).generate([traj], [""], [1])[0]
+    final, _ = postprocess(motion, traj)
+    assert final.local_quats.shape == (1, 24, 4)
+    back = trajectory_from_profiles(4, np.full(120, 0.8), np.zeros(120), start=(0.0, 0.0, np.pi))
+    final, _ = postprocess(ProceduralGait(CFG).generate([back], [""], [2])[0], back)
+    assert final.joints[-1, 0, 0] < -2.0  # walked along −x
