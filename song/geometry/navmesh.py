@@ -766,3 +766,24 @@ def _component_rings(mesh: Navmesh) -> list[list[np.ndarray]]:
         if mesh.locate(np.array([[probe.x, probe.y]]))[0] >= 0:
             out.append([np.asarray(poly.exterior.coords)] + [np.asarray(h.coords) for h in poly.interiors])
     return out
+
+
+def carve_discs(mesh: Navmesh, centres: np.ndarray, radius: float) -> Navmesh:
+    """The mesh minus discs (Detour's temporary obstacles), re-triangulated.
+
+    Args:
+        mesh: the navmesh.
+        centres: (M, 2) float64 disc centres, m.
+        radius: disc radius, m (the polygons circumscribe the discs).
+    """
+    import shapely
+    from shapely.geometry import Polygon
+    from shapely.geometry.polygon import orient
+
+    region = shapely.union_all([Polygon(r[0], r[1:]) for r in _component_rings(mesh)])
+    quad = 4
+    grown = radius / np.cos(np.pi / (4 * quad))  # the 16-gon's edges touch the true circle
+    holes = shapely.union_all(shapely.buffer(shapely.points(np.asarray(centres).reshape(-1, 2)), grown, quad_segs=quad))
+    shape = region.difference(holes)
+    parts = [orient(g, 1.0) for g in getattr(shape, "geoms", [shape]) if g.geom_type == "Polygon" and g.area > 1e-6]
+    return navmesh_from_polygons(sorted(parts, key=lambda g: g.bounds), mesh.params)

@@ -1,8 +1,9 @@
-"""Crowd stage (DESIGN §5.2): ORCA crowd simulation over the walkable area at 30 FPS."""
+"""Crowd stage (DESIGN §5.2): navmesh + ORCA crowd simulation with DetourCrowd's structure at 30 FPS."""
 
 from song.pipeline.chain import Stage, register_stage
+from song.pipeline.crowd.navmesh import load_navmesh
 from song.pipeline.crowd.stage import CrowdTracks, load_crowd, run_crowd
 
 register_stage(Stage(name="crowd", run=run_crowd, depends=("intents",), config_section="crowd"))
 
-__all__ = ["CrowdTracks", "load_crowd", "run_crowd"]
+__all__ = ["CrowdTracks", "load_crowd", "load_navmesh", "run_crowd"]

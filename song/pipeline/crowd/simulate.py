@@ -1,14 +1,21 @@
-"""Joint crowd simulation at 30 FPS with DetourCrowd's structure (DESIGN §5.2).
+"""Joint crowd simulation at 30 FPS on the navmesh, with DetourCrowd's structure (DESIGN §5.2).
 
-Per pedestrian: a path corridor (grid shortest path over legal centres, string-pulled by line of
-sight to corner points), steering toward the next visible corner (turn anticipation: a corner is
-skipped as soon as the one after it is visible), slow-down within 2r of the goal, ORCA velocity
-selection among all pedestrians, an acceleration clamp, moves constrained to the walkable area
-(sliding along walls), overlap resolution passes, and stall detection (no progress for ~2 s →
-replan; still stuck → the pedestrian is removed and the crowd re-simulated without it).
+Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
 
-Pedestrians exist for the whole scenario: they stand at their start until their departure time and
-at their goal after arriving, and others avoid them while they stand.
+1. path corridor: the exact shortest path on the navmesh as corner points; a corner is passed when
+   reached, or (every 1/3 s, turn anticipation) as soon as the corner after it is visible; a pedestrian
+   pushed out of sight of its corner gets a short detour back to it (a local replan);
+2. steering toward the next corner with Detour's smooth steer direction (the next-but-one corner pulls
+   the heading early), slowing down within 2r of the goal;
+3. ORCA velocity selection among all pedestrians and the walls (the navmesh grown back by r + 5 mm,
+   i.e. the un-eroded free space, so a pedestrian on the mesh never overlaps a wall in ORCA's eyes);
+4. acceleration clamp; moves constrained to the navmesh (sliding along its boundary); overlap
+   resolution passes (pairs pushed apart within each pedestrian's speed budget, again on the mesh);
+5. stall detection: no progress along the path for ``stall_time_s`` → a full replan; stalled again →
+   the pedestrian is removed, its reason recorded, and the crowd simulated again without it.
+
+Pedestrians exist for the whole scenario: they stand at their start until departure and at their goal
+after arriving, and others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``).
 """
 
 from __future__ import annotations
@@ -18,19 +25,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from song.config import CrowdConfig
-from song.geometry.gridpath import GridGraph, distances_from, grid_graph, line_of_sight, path_cells, shortcut
-from song.pipeline.crowd.orca import OrcaParams, orca_step
+from song.geometry.navmesh import Navmesh, carve_discs
+from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, orca_step
 from song.pipeline.intents.model import Intent
-from song.pipeline.intents.navigation import Walkable
 
-ARRIVE_M = 0.05
-CHECK_EVERY = 10  # frames between line-of-sight checks (turn anticipation, off-corridor detection): 1/3 s
-CORNER_REACHED_M = 0.02  # close enough to a corner to head for the next one (the segment after it is legal)
-PROGRESS_M = 0.1  # a pedestrian that gets no closer than this in stall_time_s is stalled
+ARRIVE_M = 0.05  # within this of the goal a pedestrian has arrived (it then stands there)
+CHECK_EVERY = 10  # frames between visibility checks (turn anticipation, off-corridor detection): 1/3 s
+CORNER_REACHED_M = 0.1  # closer than this to a corner, head for the next one (Detour's look-ahead)
+PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
 HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
-STAND_SPEED = 0.05  # below this the heading is held
+STAND_SPEED = 0.05  # m/s: below this the heading is held
 OVERLAP_PASSES = 3
-MAX_RETRIES = 3
+OVERLAP_MARGIN_M = 0.002  # overlap passes separate centres to 2r + this
+WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from the mesh
+MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
 
 
 @dataclass
@@ -50,180 +58,310 @@ class CrowdPlan:
     status: dict[int, dict] = field(default_factory=dict)
 
 
-class _Corridors:
-    """Shortest paths over the legal-centre grid, string-pulled to corners (world metres)."""
+@dataclass
+class _Walkers:
+    """Mutable per-pedestrian state of one simulation run (arrays over the N pedestrians)."""
 
-    def __init__(self, walk: Walkable) -> None:
-        self.walk = walk
-        self.mask = walk.main
-        self.graph: GridGraph = grid_graph(self.mask)
-        self.grid = walk.package.occupancy
-
-    def cell(self, xy: np.ndarray) -> tuple[int, int]:
-        rc = self.grid.to_cell(xy)
-        if 0 <= rc[0] < self.mask.shape[0] and 0 <= rc[1] < self.mask.shape[1] and self.mask[tuple(rc)]:
-            return int(rc[0]), int(rc[1])
-        near = self.graph.cells[np.argmin(((self.graph.cells - rc) ** 2).sum(axis=1))]
-        return int(near[0]), int(near[1])
-
-    def corners(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
-        a, b = self.cell(start), self.cell(goal)
-        # search no farther than a generous multiple of the straight distance first (cheap), then everywhere
-        straight = float(np.hypot(a[0] - b[0], a[1] - b[1]))
-        cells = None
-        for limit in (2.0 * straight + 40.0, np.inf):
-            dist, pred = distances_from(self.graph, a, with_path=True, limit=limit)
-            cells = path_cells(self.graph, dist, pred, b)
-            if cells is not None:
-                break
-        if cells is None:
-            return None
-        pts = self.grid.to_world(shortcut(self.mask, cells))
-        pts[-1] = goal
-        return pts[1:] if len(pts) > 1 else pts
-
-    def visible(self, a: np.ndarray, b: np.ndarray) -> bool:
-        return line_of_sight(self.mask, self.grid.to_cell(a), self.grid.to_cell(b))
-
-    def legal(self, xy: np.ndarray) -> np.ndarray:
-        return self.walk.on_main(xy)
+    pos: np.ndarray  # (N, 2) m
+    vel: np.ndarray  # (N, 2) m/s
+    goal: np.ndarray  # (N, 2) m, on the mesh
+    speed: np.ndarray  # (N,) preferred speed, m/s
+    depart: np.ndarray  # (N,) s
+    paths: list[np.ndarray]  # corners (K, 2) after the start, the last one the goal
+    suffix: list[np.ndarray]  # (K,) path length from each corner to the goal, m
+    corner: np.ndarray  # (N,) index of the corner being steered to
+    cur: np.ndarray  # (N, 2) that corner, m
+    nxt: np.ndarray  # (N, 2) the corner after it (the goal when there is none), m
+    has_next: np.ndarray  # (N,) bool: the current corner is not the goal
+    rest: np.ndarray  # (N,) path length from the current corner to the goal, m
+    arrived: np.ndarray  # (N,) bool
+    arrival: np.ndarray  # (N,) s or nan
+    best: np.ndarray  # (N,) shortest remaining path length seen, m
+    last_progress: np.ndarray  # (N,) s
+    replanned: np.ndarray  # (N,) str: why the stall replan did not help ("" until one is used)
+    heading: np.ndarray  # (N,) rad
+    smooth: np.ndarray  # (N, 2) smoothed velocity, m/s
 
 
-def _remaining(path: np.ndarray | None, corner: int, pos: np.ndarray) -> float:
-    """Path length still to walk: to the current corner, then along the remaining corners."""
-    if path is None:
-        return float("inf")
-    rest = path[corner:]
-    return float(np.linalg.norm(rest[0] - pos) + np.linalg.norm(np.diff(rest, axis=0), axis=1).sum())
+def _suffix(path: np.ndarray) -> np.ndarray:
+    steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    return np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
 
 
-def _simulate(intents: list[Intent], corridors: _Corridors, cfg: CrowdConfig, rng: np.random.Generator):
-    n, fps = len(intents), cfg.fps
-    dt = 1.0 / fps
-    r = cfg.agent_radius_m
-    params = OrcaParams(dt, cfg.neighbor_dist_m, cfg.max_neighbors, cfg.time_horizon_s)
-    goal = np.array([i.goal_xy for i in intents], dtype=np.float64)
-    pos = np.array([i.start_xy for i in intents], dtype=np.float64)
-    jitter = rng.uniform(-cfg.start_jitter_m, cfg.start_jitter_m, (n, 2))
-    pos = np.where(corridors.legal(pos + jitter)[:, None], pos + jitter, pos)
-    speed_pref = np.array([i.speed for i in intents])
-    depart = np.array([i.depart_time for i in intents])
-    paths = [corridors.corners(pos[k], goal[k]) for k in range(n)]
-    failed = {k: "no path" for k in range(n) if paths[k] is None}
-    corner = np.zeros(n, dtype=np.int64)
-    vel = np.zeros((n, 2))
-    arrived = np.zeros(n, dtype=bool)
-    arrival = np.full(n, np.nan)
-    best = np.array([_remaining(paths[k], 0, pos[k]) for k in range(n)])
-    last_progress = depart.copy()
-    replanned = np.zeros(n, dtype=bool)
-    heading = np.array(
-        [np.arctan2(*(p[0] - s)[::-1]) if p is not None else 0.0 for p, s in zip(paths, pos, strict=True)]
+def _refresh(w: _Walkers, ks) -> None:
+    """Recompute the cached corner arrays of pedestrians ``ks`` after their corner or path changed."""
+    for k in ks:
+        path, c = w.paths[k], w.corner[k]
+        w.cur[k], w.nxt[k] = path[c], path[min(c + 1, len(path) - 1)]
+        w.has_next[k], w.rest[k] = c < len(path) - 1, w.suffix[k][c]
+
+
+def _set_path(w: _Walkers, k: int, path: np.ndarray) -> None:
+    w.paths[k], w.suffix[k], w.corner[k] = path, _suffix(path), 0
+    _refresh(w, [k])
+
+
+def _advance(w: _Walkers, ks: np.ndarray) -> None:
+    w.corner[ks] += 1
+    _refresh(w, ks)
+
+
+def _remaining(w: _Walkers, idx: np.ndarray) -> np.ndarray:
+    """(M,) path length still to walk, m: to the current corner, then along the remaining corners."""
+    return np.linalg.norm(w.cur[idx] - w.pos[idx], axis=1) + w.rest[idx]
+
+
+def _plan(mesh: Navmesh, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+    res = mesh.find_path(start, goal, max_snap=MAX_SNAP_M, allow_partial=False)
+    if res.status != "ok":
+        return None
+    return res.points[1:] if len(res.points) > 1 else res.points
+
+
+def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, rng: np.random.Generator):
+    """Snapped, jittered starts; goals; paths. Returns (walkers, failures {index: reason})."""
+    n = len(intents)
+    raw = np.array([i.start_xy for i in intents], dtype=np.float64).reshape(n, 2)
+    goal_raw = np.array([i.goal_xy for i in intents], dtype=np.float64).reshape(n, 2)
+    pos, tri, _ = mesh.snap(raw, MAX_SNAP_M)
+    goal, gtri, _ = mesh.snap(goal_raw, MAX_SNAP_M)
+    jitter = rng.uniform(-cfg.start_jitter_m, cfg.start_jitter_m, (n, 2))  # breaks exact symmetry
+    if n:
+        pos = np.where((tri >= 0)[:, None], mesh.constrain_moves(pos, pos + jitter), pos)
+    failures: dict[int, str] = {}
+    paths: list[np.ndarray] = []
+    for k in range(n):
+        path = _plan(mesh, pos[k], goal[k]) if tri[k] >= 0 and gtri[k] >= 0 else None
+        if tri[k] < 0 or gtri[k] < 0:
+            failures[k] = f"{'start' if tri[k] < 0 else 'goal'} is more than {MAX_SNAP_M} m off the navmesh"
+        elif path is None:
+            failures[k] = "goal is not reachable on the navmesh"
+        paths.append(path if path is not None else goal[k : k + 1].copy())
+    d = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.triu(np.full((n, n), np.inf))
+    for k, j in zip(*np.nonzero(d < 2 * cfg.agent_radius_m), strict=True):  # too crowded to stand there
+        if k not in failures and j not in failures:
+            failures[int(k)] = f"start overlaps pedestrian {intents[int(j)].id}"
+    first = np.array([p[0] for p in paths]).reshape(n, 2)
+    heading = np.arctan2(first[:, 1] - pos[:, 1], first[:, 0] - pos[:, 0])
+    w = _Walkers(
+        pos=pos,
+        vel=np.zeros((n, 2)),
+        goal=goal,
+        speed=np.array([i.speed for i in intents], dtype=np.float64),
+        depart=np.array([i.depart_time for i in intents], dtype=np.float64),
+        paths=paths,
+        suffix=[_suffix(p) for p in paths],
+        corner=np.zeros(n, dtype=np.int64),
+        cur=np.zeros((n, 2)),
+        nxt=np.zeros((n, 2)),
+        has_next=np.zeros(n, dtype=bool),
+        rest=np.zeros(n),
+        arrived=np.zeros(n, dtype=bool),
+        arrival=np.full(n, np.nan),
+        best=np.zeros(n),
+        last_progress=np.array([i.depart_time for i in intents], dtype=np.float64),
+        replanned=np.full(n, "", dtype=object),
+        heading=heading,
+        smooth=np.zeros((n, 2)),
     )
-    smooth = np.zeros((n, 2))
-    max_frames = int(cfg.max_duration_s * fps)
-    out_xy, out_yaw, out_speed = [pos.copy()], [heading.copy()], [np.zeros(n)]
-    stall_frames = cfg.stall_time_s
-    for frame in range(1, max_frames + 1):
-        t = frame * dt
-        moving = (depart <= t) & ~arrived
-        for k in failed:
-            moving[k] = False
-        pref = np.zeros((n, 2))
-        for k in np.flatnonzero(moving):
-            path = paths[k]
-            while corner[k] < len(path) - 1 and (
-                np.linalg.norm(path[corner[k]] - pos[k]) < 0.1
-                or (frame % CHECK_EVERY == 0 and corridors.visible(pos[k], path[corner[k] + 1]))
-            ):
-                corner[k] += 1
-            if frame % CHECK_EVERY == 0 and not corridors.visible(pos[k], path[corner[k]]):
-                # pushed off the corridor: a short detour back to the current corner, then the old corridor
-                detour = corridors.corners(pos[k], path[corner[k]])
-                if detour is not None:
-                    path = np.vstack([detour, path[corner[k] + 1 :]])
-                    paths[k], corner[k] = path, 0
-            to = path[corner[k]] - pos[k]
-            d = np.linalg.norm(to)
-            d_goal = np.linalg.norm(goal[k] - pos[k])
-            desired = speed_pref[k] * min(1.0, d_goal / (2 * r))  # slow down within 2r of the goal
-            desired = min(desired, d / dt)
-            pref[k] = to / max(d, 1e-9) * desired
-        new_vel = orca_step(pos, vel, pref, np.full(n, r), np.where(moving, speed_pref, 0.0), params)
-        dv = new_vel - vel
-        limit = cfg.max_accel_mps2 * dt
-        norm = np.linalg.norm(dv, axis=1, keepdims=True)
-        new_vel = vel + np.where(norm > limit, dv / np.maximum(norm, 1e-12) * limit, dv)
-        new_vel[~moving] = 0.0
-        step = new_vel * dt
-        target = pos + step
-        ok = corridors.legal(target)
-        for k in np.flatnonzero(~ok & moving):  # slide along walls, else stay
-            for candidate in (pos[k] + [step[k, 0], 0.0], pos[k] + [0.0, step[k, 1]]):
-                if corridors.legal(candidate[None])[0]:
-                    target[k] = candidate
-                    break
-            else:
-                target[k] = pos[k]
-        budget = speed_pref * dt * 1.005 - np.linalg.norm(target - pos, axis=1)
-        for _ in range(OVERLAP_PASSES):
-            diff = target[:, None, :] - target[None, :, :]
-            dist = np.linalg.norm(diff, axis=-1)
-            np.fill_diagonal(dist, np.inf)
-            overlap = np.clip(2 * r + 0.002 - dist, 0.0, None)
-            if not overlap.any():
-                break
-            push = (diff / np.maximum(dist, 1e-9)[..., None] * (0.5 * overlap)[..., None]).sum(axis=1)
-            push[~moving] = 0.0  # standing pedestrians hold their place; walkers make room
-            size = np.linalg.norm(push, axis=1)
-            scale = np.minimum(1.0, np.maximum(budget, 0.0) / np.maximum(size, 1e-12))
-            pushed = target + push * scale[:, None]
-            legal = corridors.legal(pushed)
-            budget -= np.where(legal, size * scale, 0.0)
-            target = np.where(legal[:, None], pushed, target)
-        vel = (target - pos) / dt
-        pos = target
-        d_goal = np.linalg.norm(goal - pos, axis=1)
-        done = moving & (d_goal < ARRIVE_M)  # stands where it is (no snap: a snap would exceed its speed)
-        arrived |= done
-        arrival[done] = t
-        remaining = np.array([_remaining(paths[k], corner[k], pos[k]) for k in range(n)])
-        improved = moving & (remaining < best - PROGRESS_M)
-        best = np.where(improved, remaining, best)
-        last_progress = np.where(improved, t, last_progress)
-        for k in np.flatnonzero(moving & ~done & (t - last_progress > stall_frames)):
-            if replanned[k]:
-                return None, {k: "stalled after replanning"}
-            replanned[k] = True
-            last_progress[k] = t
-            new_path = corridors.corners(pos[k], goal[k])
-            if new_path is not None:
-                paths[k], corner[k] = new_path, 0
-                best[k] = _remaining(new_path, 0, pos[k])
-        smooth = (1 - HEADING_SMOOTHING) * smooth + HEADING_SMOOTHING * vel
-        spd = np.linalg.norm(smooth, axis=1)
-        heading = np.where(spd > STAND_SPEED, np.arctan2(smooth[:, 1], smooth[:, 0]), heading)
-        out_xy.append(pos.copy())
-        out_yaw.append(heading.copy())
-        out_speed.append(np.linalg.norm(vel, axis=1))
-        if (arrived | np.isin(np.arange(n), list(failed))).all():
+    _refresh(w, range(n))
+    w.best = _remaining(w, np.arange(n))
+    return w, failures
+
+
+def _update_corners(w: _Walkers, mesh: Navmesh, moving: np.ndarray, check: bool) -> None:
+    """Pass reached corners; on check frames pass corners whose successor is visible, detour when lost."""
+    for _ in range(8):  # corners closer together than the look-ahead are passed in one frame
+        reached = np.flatnonzero(moving & w.has_next & (np.linalg.norm(w.cur - w.pos, axis=1) < CORNER_REACHED_M))
+        if not len(reached):
             break
-    if failed:
-        return None, failed
-    return (np.stack(out_xy, 1), np.stack(out_yaw, 1), np.stack(out_speed, 1), arrived, arrival), {}
+        _advance(w, reached)
+    if not check:
+        return
+    for _ in range(4):  # turn anticipation: several corners may become visible at once
+        ahead = np.flatnonzero(moving & w.has_next)
+        if not len(ahead):
+            break
+        seen = ahead[mesh.segment_clear(w.pos[ahead], w.nxt[ahead])]
+        if not len(seen):
+            break
+        _advance(w, seen)
+    idx = np.flatnonzero(moving)
+    for k in idx[~mesh.segment_clear(w.pos[idx], w.cur[idx])]:
+        # pushed off the corridor: a short detour back to the current corner, then the old corridor
+        detour = _plan(mesh, w.pos[k], w.cur[k])
+        if detour is not None:
+            _set_path(w, k, np.vstack([detour, w.paths[k][w.corner[k] + 1 :]]))
 
 
-def plan_crowd(intents: list[Intent], walk: Walkable, cfg: CrowdConfig, rng: np.random.Generator) -> CrowdPlan:
-    """Simulate all pedestrians jointly; pedestrians that cannot be planned are removed with a reason."""
-    corridors = _Corridors(walk)
+def _preferred(w: _Walkers, moving: np.ndarray, radius: float, dt: float) -> np.ndarray:
+    """Preferred velocities: Detour's smooth steer toward the corners, slowing within 2r of the goal."""
+    pref = np.zeros_like(w.pos)
+    idx = np.flatnonzero(moving)
+    if not len(idx):
+        return pref
+    c0, c1, has_next = w.cur[idx], w.nxt[idx], w.has_next[idx]
+    pos = w.pos[idx]
+    dir0 = c0 - pos
+    len0 = np.linalg.norm(dir0, axis=1)
+    dir1 = c1 - pos
+    dir1 /= np.maximum(np.linalg.norm(dir1, axis=1), 1e-3)[:, None]
+    # turn anticipation: dvel = dir0 - dir1 * len0 * 0.5 (Detour's calcSmoothSteerDirection)
+    steer = np.where(has_next[:, None], dir0 - dir1 * (0.5 * len0)[:, None], dir0)
+    d_goal = np.linalg.norm(w.goal[idx] - pos, axis=1)
+    desired = w.speed[idx] * np.minimum(1.0, d_goal / (2.0 * radius))
+    desired = np.where(has_next, desired, np.minimum(desired, len0 / dt))  # do not overshoot the goal
+    pref[idx] = steer / np.maximum(np.linalg.norm(steer, axis=1), 1e-9)[:, None] * desired[:, None]
+    return pref
+
+
+def _separate(w: _Walkers, mesh: Navmesh, target: np.ndarray, moving: np.ndarray, radius: float, dt: float):
+    """Overlap resolution passes: push overlapping pairs apart; walkers move within their speed limit."""
+    max_step = w.speed * dt
+    for _ in range(OVERLAP_PASSES):
+        diff = target[:, None, :] - target[None, :, :]
+        dist = np.linalg.norm(diff, axis=-1)
+        np.fill_diagonal(dist, np.inf)
+        overlap = np.clip(2 * radius + OVERLAP_MARGIN_M - dist, 0.0, None)
+        if not overlap.any():
+            break
+        share = np.where(moving[None, :], 0.5, 1.0)  # a standing pedestrian holds its place: the walker moves it all
+        push = (diff / np.maximum(dist, 1e-9)[..., None] * (share * overlap)[..., None]).sum(axis=1)
+        push[~moving] = 0.0
+        step = target + push - w.pos
+        size = np.linalg.norm(step, axis=1, keepdims=True)
+        step *= np.minimum(1.0, max_step[:, None] / np.maximum(size, 1e-12))
+        rows = np.flatnonzero(moving & (np.abs(push).sum(axis=1) > 0))
+        if len(rows):
+            target[rows] = mesh.constrain_moves(w.pos[rows], w.pos[rows] + step[rows])
+    return target
+
+
+def _clamp_speed(w: _Walkers, mesh: Navmesh, target: np.ndarray, dt: float) -> np.ndarray:
+    """Sliding along a non-convex wall can lengthen a step a little: shorten it back to the speed limit."""
+    disp = target - w.pos
+    size = np.linalg.norm(disp, axis=1)
+    over = np.flatnonzero(size > w.speed * dt)
+    if len(over):
+        scaled = w.pos[over] + disp[over] * (w.speed[over] * dt / size[over])[:, None]
+        ok = mesh.segment_clear(w.pos[over], scaled)
+        target[over] = np.where(ok[:, None], scaled, w.pos[over])
+    return target
+
+
+def _step_frame(w, mesh, obstacles, params, moving, cfg, frame):
+    dt, r = 1.0 / cfg.fps, cfg.agent_radius_m
+    if not moving.any():
+        w.vel = np.zeros_like(w.vel)
+        return
+    _update_corners(w, mesh, moving, frame % CHECK_EVERY == 0)
+    pref = _preferred(w, moving, r, dt)
+    # ORCA for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
+    d = np.linalg.norm(w.pos[:, None] - w.pos[None, moving], axis=-1)
+    sub = np.flatnonzero(moving | (d < params.neighbor_dist).any(axis=1))
+    new_vel = np.zeros_like(w.vel)
+    new_vel[sub] = orca_step(
+        w.pos[sub], w.vel[sub], pref[sub], np.full(len(sub), r), np.where(moving, w.speed, 0.0)[sub], obstacles, params
+    )
+    dv = new_vel - w.vel
+    limit = cfg.max_accel_mps2 * dt
+    norm = np.linalg.norm(dv, axis=1, keepdims=True)
+    new_vel = w.vel + np.where(norm > limit, dv / np.maximum(norm, 1e-12) * limit, dv)
+    new_vel[~moving] = 0.0
+    target = w.pos.copy()
+    rows = np.flatnonzero(moving)
+    if len(rows):
+        target[rows] = mesh.constrain_moves(w.pos[rows], w.pos[rows] + new_vel[rows] * dt)
+    target = _separate(w, mesh, target, moving, r, dt)
+    target = _clamp_speed(w, mesh, target, dt)
+    w.vel = (target - w.pos) / dt
+    w.pos = target
+
+
+def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, stall_s: float, radius: float):
+    """Record arrivals; replan stalled pedestrians once; return those stalled again (to remove)."""
+    done = moving & (np.linalg.norm(w.goal - w.pos, axis=1) < ARRIVE_M)
+    w.arrived |= done  # it stands where it is (no snap: a snap would exceed its speed)
+    w.arrival[done] = t
+    idx = np.flatnonzero(moving & ~done)
+    if not len(idx):
+        return {}
+    remaining = _remaining(w, idx)
+    better = remaining < w.best[idx] - PROGRESS_M
+    w.best[idx[better]], w.last_progress[idx[better]] = remaining[better], t
+    failed: dict[int, str] = {}
+    for k in idx[~better & (t - w.last_progress[idx] > stall_s)]:
+        if w.replanned[k]:
+            failed[int(k)] = f"stalled for {stall_s:g} s after replanning ({w.replanned[k]})"
+            continue
+        w.last_progress[k] = t
+        path, w.replanned[k] = _replan_around_standing(w, mesh, k, moving, radius)
+        _set_path(w, k, path)
+        w.best[k] = _remaining(w, np.array([k]))[0]
+    return failed
+
+
+def _replan_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float):
+    """A new path for stalled pedestrian k that avoids everyone standing (Detour's temporary obstacles).
+
+    Returns the path and why a later stall is final: the way is blocked, or the crowd is too dense.
+    """
+    standing = np.flatnonzero(~moving)
+    if len(standing):
+        carved = carve_discs(mesh, w.pos[standing], 2 * radius + OVERLAP_MARGIN_M)
+        res = carved.find_path(w.pos[k], w.goal[k], max_snap=MAX_SNAP_M, allow_partial=False)
+        if res.status == "ok":
+            return (res.points[1:] if len(res.points) > 1 else res.points), "too crowded"
+    path = _plan(mesh, w.pos[k], w.goal[k])
+    reason = "the way is blocked by pedestrians standing at their start or goal" if len(standing) else "too crowded"
+    return (path if path is not None else w.paths[k][w.corner[k] :]), reason
+
+
+def _simulate(intents, mesh, obstacles, cfg, rng):
+    """One joint run. Returns ((xy, yaw, speed, arrived, arrival), {}) or (None, failures to remove)."""
+    w, failures = _start(intents, mesh, cfg, rng)
+    if failures:
+        return None, failures
+    fps = cfg.fps
+    params = OrcaParams(1.0 / fps, cfg.neighbor_dist_m, cfg.max_neighbors, cfg.time_horizon_s, cfg.time_horizon_obst_s)
+    out_xy, out_yaw, out_speed = [w.pos.copy()], [w.heading.copy()], [np.zeros(len(w.pos))]
+    for frame in range(1, int(cfg.max_duration_s * fps) + 1):
+        t = frame / fps
+        moving = (w.depart <= t) & ~w.arrived
+        _step_frame(w, mesh, obstacles, params, moving, cfg, frame)
+        failed = _check_progress(w, mesh, moving, t, cfg.stall_time_s, cfg.agent_radius_m)
+        if failed:
+            return None, failed
+        w.smooth = (1 - HEADING_SMOOTHING) * w.smooth + HEADING_SMOOTHING * w.vel
+        spd = np.linalg.norm(w.smooth, axis=1)
+        w.heading = np.where(spd > STAND_SPEED, np.arctan2(w.smooth[:, 1], w.smooth[:, 0]), w.heading)
+        out_xy.append(w.pos.copy())
+        out_yaw.append(w.heading.copy())
+        out_speed.append(np.linalg.norm(w.vel, axis=1))
+        if w.arrived.all():
+            break
+    return (np.stack(out_xy, 1), np.stack(out_yaw, 1), np.stack(out_speed, 1), w.arrived, w.arrival), {}
+
+
+def plan_crowd(
+    intents: list[Intent], mesh: Navmesh, obstacles: ObstacleSet | None, cfg: CrowdConfig, rng: np.random.Generator
+) -> CrowdPlan:
+    """Simulate all pedestrians jointly; those that cannot be planned are removed with a reason.
+
+    Args:
+        intents: the scene's pedestrians (start, goal, speed, departure).
+        mesh: the navmesh of legal centres at ``cfg.agent_radius_m``.
+        obstacles: ORCA walls (see :func:`song.geometry.navmesh.obstacle_rings`), or None.
+        cfg: crowd parameters. rng: seeded generator (start jitter).
+    """
     kept = list(intents)
     status: dict[int, dict] = {}
-    for _ in range(MAX_RETRIES + len(intents)):
-        if not kept:
-            break
-        result, failures = _simulate(kept, corridors, cfg, rng)
+    state = rng.bit_generator.state
+    while kept:
+        rng.bit_generator.state = state  # every re-run draws the same jitter stream: results depend on who is kept only
+        result, failures = _simulate(kept, mesh, obstacles, cfg, rng)
         if result is None:
-            for k, reason in failures.items():
+            for k, reason in sorted(failures.items()):
                 status[kept[k].id] = {"status": "removed", "reason": reason, "arrival_s": None}
             kept = [intent for k, intent in enumerate(kept) if k not in failures]
             continue
@@ -232,7 +370,7 @@ def plan_crowd(intents: list[Intent], walk: Walkable, cfg: CrowdConfig, rng: np.
             ok = bool(arrived[k])
             status[intent.id] = {
                 "status": "arrived" if ok else "timeout",
-                "reason": "" if ok else "did not arrive within max_duration_s",
+                "reason": "" if ok else f"did not arrive within {cfg.max_duration_s:g} s",
                 "arrival_s": round(float(arrival[k]), 4) if ok else None,
             }
         ids = np.array([intent.id for intent in kept], dtype=np.int64)
