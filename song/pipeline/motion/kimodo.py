@@ -155,7 +155,7 @@ class CachedTextEncoder:
     def __call__(self, texts: str | list[str]) -> tuple[Any, list[int]]:
         import torch
 
-        texts = [texts] if isinstance(texts, str) else list(texts)
+        texts = _sanitize([texts] if isinstance(texts, str) else list(texts))  # idempotent
         arrays = [self._load(text) for text in texts]
         lengths = [len(a) for a in arrays]
         feat = np.zeros((len(arrays), max(lengths), arrays[0].shape[1]), dtype=np.float32)

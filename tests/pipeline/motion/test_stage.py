@@ -148,3 +148,21 @@ def test_stage_registered_and_cli(make_scene, tmp_path):
     assert result.exit_code == 0 and "--generator" in result.output
     result = CliRunner().invoke(app, ["motion", "--run", str(tmp_path / "missing"), "--generator", "bogus"])
     assert result.exit_code != 0
+
+
+@pytest.mark.slow
+def test_motion_on_the_sample_run(sample_run):
+    """The real chain: intents + crowd on the shipped samples, then motion; every pedestrian meets the targets."""
+    import song.pipeline.motion  # noqa: F401  (registers the stage in this process)
+    from song.pipeline.chain import iter_run, read_run
+
+    scenes_dir, config = read_run(sample_run)
+    results = list(iter_run(scenes_dir, sample_run, config, ["motion"], executor="serial"))
+    assert results and all(r.status == "ok" for r in results), [r.error for r in results]
+    metas = [load_motion(p.parent).meta for p in sorted(sample_run.glob("scenes/*/human_amass/*/motion.npz"))]
+    assert metas
+    for meta in metas:
+        q = meta["quality"]
+        assert q["foot_skating_ratio"] <= 0.02 and q["penetration_p99_m"] <= 0.01
+        assert q["root_error_mean_m"] <= 0.02 and q["root_error_max_m"] <= 0.05
+        assert q["knee_flexion_min_deg"] >= 0.0 and q["elbow_flexion_min_deg"] >= 0.0

@@ -1,0 +1,175 @@
+"""Motion quality and speed over synthetic plans and every pedestrian of existing crowd runs (JSON).
+
+.venv/bin/python benchmarks/motion.py [--quick] [--runs RUN ...] [--figure PATH]
+
+Per pedestrian: procedural gait + the full post-processing (align, resample, smooth, contacts, foot
+locking), then the issue's figures (``song/pipeline/motion/quality.py``). CPU seconds are process
+time of generation + post-processing, reported per pedestrian-minute of motion. ``--figure`` writes a
+PNG: a strip of stick-figure poses over one gait cycle (side and top views) and the foot heights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import ROOT, emit  # noqa: E402
+
+from song.config import MotionConfig  # noqa: E402
+from song.pipeline.motion import ProceduralGait, read_trajectories  # noqa: E402
+from song.pipeline.motion.postprocess import postprocess  # noqa: E402
+from song.pipeline.motion.quality import motion_quality  # noqa: E402
+from song.pipeline.motion.synthetic import synthetic_trajectories  # noqa: E402
+from song.util import derive_seed  # noqa: E402
+
+TARGETS = {
+    "foot_skating_ratio": ("max", 0.02),
+    "penetration_p99_m": ("max", 0.01),
+    "contact_float_max_m": ("max", 0.02),
+    "root_error_mean_m": ("max", 0.02),
+    "root_error_max_m": ("max", 0.05),
+    "cadence_error_median": ("max", 0.10),
+    "knee_flexion_min_deg": ("min", 0.0),
+    "elbow_flexion_min_deg": ("min", 0.0),
+    "cpu_s_per_ped_minute": ("max", 0.2),
+}
+
+
+def _measure(traj, seed: int, cfg: MotionConfig) -> tuple[dict, float, object]:
+    start = time.process_time()
+    raw = ProceduralGait(cfg).generate([traj], [""], [seed])[0]
+    final, _ = postprocess(
+        raw, traj, cfg.smoothing_sigma_frames, cfg.contact_height_m, cfg.contact_speed_mps, cfg.lock_blend_frames
+    )
+    cpu = time.process_time() - start
+    quality = motion_quality(
+        final.joints,
+        final.local_quats,
+        final.rest_joints,
+        final.contacts,
+        final.t,
+        traj.xy,
+        traj.speed,
+        cfg.walk_ratio_m_s,
+        cfg.min_cadence_spm,
+    )
+    return quality, cpu, final
+
+
+def _summary(rows: list[dict]) -> dict:
+    out = {}
+    for key in rows[0]:
+        values = np.array([row[key] for row in rows], dtype=np.float64)
+        out[key] = {
+            "mean": round(float(values.mean()), 5),
+            "max": round(float(values.max()), 5),
+            "min": round(float(values.min()), 5),
+        }
+    return out
+
+
+def figure(path: Path, cfg: MotionConfig) -> None:
+    """Stick figures over one gait cycle (side, top) and the foot / pelvis heights."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from song.geometry.skeleton import PARENTS
+
+    traj = synthetic_trajectories(8.0)["straight_1.0"]
+    _, _, motion = _measure(traj, 3, cfg)
+    joints, contacts, t = motion.joints, motion.contacts, motion.t
+    onsets = np.flatnonzero(contacts[1:, 0] & ~contacts[:-1, 0]) + 1
+    start, end = onsets[2], onsets[3]
+    frames = np.linspace(start, end, 9).round().astype(int)
+    left = {1, 4, 7, 10, 13, 16, 18, 20, 22}
+    right = {2, 5, 8, 11, 14, 17, 19, 21, 23}
+    fig, axes = plt.subplots(3, 1, figsize=(13, 9), gridspec_kw={"height_ratios": [2.2, 1, 1.3]})
+    for k, f in enumerate(frames):
+        pose = joints[f] - np.array([joints[f, 0, 0] - 0.75 * k, joints[f, 0, 1], 0.0])
+        for j in range(1, 24):
+            colour = "tab:red" if j in left else "tab:blue" if j in right else "k"
+            p = PARENTS[j]
+            axes[0].plot([pose[j, 0], pose[p, 0]], [pose[j, 2], pose[p, 2]], color=colour, lw=2)
+            axes[1].plot([pose[j, 0], pose[p, 0]], [pose[j, 1], pose[p, 1]], color=colour, lw=1.5)
+        axes[0].text(0.75 * k, -0.12, f"{100 * (f - start) / (end - start):.0f}%", ha="center", fontsize=8)
+    axes[0].set_title("one gait cycle at 1.0 m/s (side view; red = left, blue = right; % of the cycle)")
+    axes[1].set_title("top view")
+    for ax in axes[:2]:
+        ax.set_aspect("equal")
+        ax.axis("off")
+    axes[0].axhline(0.0, color="0.7", lw=0.8)
+    window = (t >= t[start] - 1.0) & (t <= t[end] + 1.0)
+    for side, (toe, ankle, colour) in enumerate(((10, 7, "tab:red"), (11, 8, "tab:blue"))):
+        axes[2].plot(t[window], joints[window, toe, 2], color=colour, label=f"{'left' if side == 0 else 'right'} ball")
+        axes[2].plot(t[window], joints[window, ankle, 2], color=colour, ls="--", lw=1, label="ankle")
+        axes[2].fill_between(t[window], 0, 0.02 * contacts[window, side], color=colour, alpha=0.25, step="mid")
+    axes[2].axhline(0.05, color="0.5", ls=":", lw=1, label="5 cm (skating height)")
+    axes[2].set_xlabel("time (s)")
+    axes[2].set_ylabel("height (m)")
+    axes[2].set_title("foot heights (shaded: detected contact)")
+    axes[2].legend(ncol=5, fontsize=8, loc="upper right")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=90)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="synthetic plans + one crowd scene")
+    parser.add_argument("--runs", type=Path, nargs="*", default=[ROOT / "runs" / "demo"], help="run folders")
+    parser.add_argument("--figure", type=Path, default=None, help="write the gait-cycle PNG here")
+    args = parser.parse_args()
+    cfg = MotionConfig()
+    ProceduralGait(cfg).generate([synthetic_trajectories(1.0)["straight_1.0"]], [""], [0])  # warm-up
+    groups: dict[str, list[tuple[dict, float, float]]] = {"synthetic": [], "crowd": []}
+    for name, traj in synthetic_trajectories(6.0 if args.quick else 12.0).items():
+        quality, cpu, _ = _measure(traj, derive_seed("bench", name), cfg)
+        groups["synthetic"].append((quality, cpu, traj.t[-1] - traj.t[0] + 1 / 30))
+    files = sorted(p for run in args.runs if run.exists() for p in (run / "scenes").glob("*/crowd.parquet"))
+    if args.quick:
+        files = files[:1]
+    for path in files:
+        for traj in read_trajectories(path):
+            quality, cpu, _ = _measure(traj, derive_seed("bench", path.parent.name, traj.ped_id), cfg)
+            groups["crowd"].append((quality, cpu, traj.t[-1] - traj.t[0] + 1 / 30))
+    result: dict = {"targets": {k: f"{op} {v}" for k, (op, v) in TARGETS.items()}}
+    for name, rows in groups.items():
+        if not rows:
+            continue
+        qualities = [row[0] for row in rows]
+        cpu = sum(row[1] for row in rows)
+        minutes = sum(row[2] for row in rows) / 60.0
+        summary = _summary(qualities)
+        per_minute = cpu / minutes
+        checks = {}
+        for key, (op, bound) in TARGETS.items():
+            value = per_minute if key == "cpu_s_per_ped_minute" else summary[key][op]
+            checks[key] = {
+                "value": round(float(value), 5),
+                "ok": bool(value <= bound if op == "max" else value >= bound),
+            }
+        result[name] = {
+            "pedestrians": len(rows),
+            "pedestrian_minutes": round(minutes, 2),
+            "cpu_s": round(cpu, 3),
+            "cpu_s_per_ped_minute": round(per_minute, 4),
+            "checks": checks,
+            "all_ok": all(c["ok"] for c in checks.values()),
+            "quality": summary,
+        }
+    result["crowd_files"] = [str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p) for p in files]
+    if args.figure:
+        figure(args.figure, cfg)
+        result["figure"] = str(args.figure)
+    emit(result)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,139 @@
+"""Kimodo adapter against a fake ``kimodo`` with the real signatures (tests/pipeline/motion/fake_kimodo.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from song.config import MotionConfig
+from song.geometry.rotations import quat_angle, quat_identity, quat_to_matrix, yaw_of_matrix
+from song.pipeline.motion.generators import make_generator
+from song.pipeline.motion.kimodo import (
+    CachedTextEncoder,
+    KimodoGenerator,
+    MissingEmbeddingError,
+    canonicalize,
+    kimodo_availability,
+    store_prompt_embedding,
+)
+from song.pipeline.motion.stage import synthesize_motions
+from song.pipeline.motion.synthetic import trajectory_from_profiles
+from tests.pipeline.motion import fake_kimodo
+
+PROMPT = MotionConfig().prompt
+
+
+@pytest.fixture
+def fake(monkeypatch, tmp_path):
+    state = fake_kimodo.install(monkeypatch, tmp_path / "checkpoints")
+    cache = tmp_path / "embeddings"
+    store_prompt_embedding(cache, PROMPT, np.ones((7, 16), dtype=np.float32))
+    cfg = MotionConfig(kimodo_embedding_cache=str(cache), kimodo_max_frames=120, kimodo_steps=12, kimodo_batch_size=4)
+    return state, cfg
+
+
+def _plans():
+    n = 90
+    straight = trajectory_from_profiles(0, np.full(n, 1.0), np.zeros(n), start=(2.0, -1.0, 2.0))
+    curve = trajectory_from_profiles(1, np.full(n, 0.8), np.full(n, 0.6), start=(-1.0, 3.0, -0.5))
+    long = trajectory_from_profiles(2, np.full(300, 0.7), 0.3 * np.sin(np.arange(300) / 40), start=(0.0, 0.0, 1.0))
+    return [straight, curve, long]
+
+
+def test_availability_and_selection(fake):
+    _, cfg = fake
+    assert kimodo_availability(cfg.kimodo_model) == ""
+    generator, reason = make_generator(cfg)
+    assert isinstance(generator, KimodoGenerator) and reason == ""
+
+
+def test_what_kimodo_receives(fake):
+    state, cfg = fake
+    plans = _plans()
+    KimodoGenerator(cfg).generate(plans, ["a", "b", "c"], [11, 12, 13])
+    model = state.models[0]
+    batched, multi = model.calls
+    # short tracks: one batched call, one constraint list per sample, the paper's prompt
+    assert batched["prompts"] == [PROMPT, PROMPT] and batched["num_samples"] == 2
+    assert batched["num_frames"] == [90, 90] and not batched["multi_prompt"]
+    assert batched["steps"] == 12 and batched["post_processing"] is True and batched["return_numpy"] is True
+    assert torch.equal(batched["first_heading_angle"], torch.zeros(2))
+    assert batched["text_feat_shape"] == (2, 7, 16) and batched["text_lengths"] == [7, 7]
+    for group, plan in zip(batched["constraint_lst"], plans[:2], strict=True):
+        (constraint,) = group
+        root = constraint.smooth_root_2d
+        assert root.dtype == torch.float32 and root.shape == (90, 2)
+        assert torch.equal(constraint.frame_indices, torch.arange(90))
+        assert np.allclose(root[0].numpy(), 0.0)  # frame 0 at the origin
+        heading = fake_kimodo.heading_from(constraint)
+        assert abs(heading[0]) < 1e-6  # first heading faces +Z
+        # θ = atan2(dx, dz) of the path agrees with the constrained heading
+        d = np.diff(root.numpy().astype(np.float64), axis=0)
+        assert np.abs(fake_kimodo.angle_diff(np.arctan2(d[:, 0], d[:, 1]), heading[:-1])).max() < 0.05
+        assert np.allclose(
+            np.linalg.norm(d, axis=1).sum(), np.linalg.norm(np.diff(plan.xy, axis=0), axis=1).sum(), rtol=1e-4
+        )
+    straight = batched["constraint_lst"][0][0].smooth_root_2d.numpy()
+    assert np.abs(straight[:, 0]).max() < 1e-5 and straight[-1, 1] > 2.9  # straight ahead along +Z
+    curve = batched["constraint_lst"][1][0].smooth_root_2d.numpy()
+    assert curve[-1, 0] > 0.3  # a left (CCW) turn goes to Kimodo +X (the body's left)
+    # the long track: multi-prompt, segments of at most kimodo_max_frames, one shared constraint list
+    assert multi["multi_prompt"] and multi["num_samples"] == 1
+    assert sum(multi["num_frames"]) == 300 and max(multi["num_frames"]) <= 120 and len(multi["prompts"]) == 3
+    assert len(multi["constraint_lst"]) == 1 and multi["constraint_lst"][0].smooth_root_2d.shape == (300, 2)
+
+
+def test_output_is_mapped_back_to_the_world(fake):
+    _, cfg = fake
+    plans = _plans()
+    motions = KimodoGenerator(cfg).generate(plans, ["a", "b", "c"], [11, 12, 13])
+    for motion, plan in zip(motions, plans, strict=True):
+        assert motion.local_quats.shape == (plan.n_frames, 24, 4)
+        yaw = yaw_of_matrix(quat_to_matrix(motion.local_quats[:, 0]))
+        assert np.abs(fake_kimodo.angle_diff(yaw, plan.yaw)).max() < 1e-4
+        # the fake's Kimodo-frame root bias comes back rotated into the world: ~3.6 cm from the plan
+        err = np.linalg.norm(motion.root_pos[:, :2] - plan.xy, axis=1)
+        assert np.allclose(err, np.hypot(*fake_kimodo.ROOT_OFFSET), atol=1e-4)
+        assert np.allclose(motion.root_pos[:, 2], motion.rest_joints[0, 2], atol=1e-5)  # hips height rescaled
+        # the fake body is T-posed: every non-root local rotation is the identity after retargeting
+        assert quat_angle(motion.local_quats[:, 1:], quat_identity((plan.n_frames, 23))).max() < 1e-5
+        info = motion.info
+        assert info["name"] == "kimodo" and info["prompt"] == PROMPT and info["model"] == "kimodo-soma-rp"
+    assert motions[2].info["segments"] == 3
+
+
+def test_pipeline_aligns_kimodo_output(fake):
+    _, cfg = fake
+    plans = _plans()
+    results = synthesize_motions(plans, ["a", "b", "c"], [1, 2, 3], cfg)
+    for (motion, meta), plan in zip(results, plans, strict=True):
+        assert meta["generator"]["name"] == "kimodo" and meta["generator"]["fallback"] is False
+        assert meta["alignment"]["root_error_before_mean_m"] > 0.03
+        assert meta["quality"]["root_error_mean_m"] < 0.005
+        assert np.linalg.norm(motion.root_pos[:, :2] - plan.xy, axis=1).max() < 0.02
+
+
+def test_missing_embedding_falls_back_in_auto_mode(fake, tmp_path):
+    _, cfg = fake
+    cfg = cfg.model_copy(update={"prompt": "A person is jogging", "generator": "auto"})
+    results = synthesize_motions(_plans()[:1], ["a"], [1], cfg)
+    meta = results[0][1]
+    assert meta["generator"]["name"] == "procedural" and meta["generator"]["fallback"] is True
+    assert "MissingEmbeddingError" in meta["generator"]["fallback_reason"]
+    with pytest.raises(MissingEmbeddingError):
+        synthesize_motions(_plans()[:1], ["a"], [1], cfg.model_copy(update={"generator": "kimodo"}))
+
+
+def test_cached_encoder_pads_and_canonical_frame():
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        store_prompt_embedding(folder, "a b", np.ones((3, 4)))
+        store_prompt_embedding(folder, "c", np.full((5, 4), 2.0))
+        feat, lengths = CachedTextEncoder(folder)(["a  b", "c"])  # whitespace is sanitised away
+    assert feat.shape == (2, 5, 4) and lengths == [3, 5] and float(feat[0, 3:].abs().sum()) == 0.0
+    plan = trajectory_from_profiles(0, np.full(30, 1.0), np.zeros(30), start=(5.0, 5.0, np.pi / 2))
+    canon = canonicalize(plan, plan.t)
+    assert np.allclose(canon["root_2d"][:, 0], 0.0, atol=1e-12) and canon["root_2d"][-1, 1] > 0.9
+    assert float(canon["yaw0"]) == pytest.approx(np.pi / 2)
