@@ -37,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 EPS = 1e-5  # RVO_EPSILON: parallel-line threshold in the LPs, side tests in the obstacle tree
 FAR = 1e6  # offset (m/s) of the filler line in unused slots: far outside any max-speed disc
@@ -236,28 +237,34 @@ def _agent_neighbours(positions: np.ndarray, params: OrcaParams) -> tuple[np.nda
         d2[np.arange(n), np.arange(n)] = np.inf
         idx = np.argsort(d2, axis=1, kind="stable")[:, :k]
         return idx, np.take_along_axis(d2, idx, axis=1) < range_sq
-    from scipy.spatial import cKDTree
-
-    _, idx = cKDTree(positions).query(positions, k=k + 1, distance_upper_bound=params.neighbor_dist)
-    idx = np.where(idx == np.arange(n)[:, None], n, idx)  # drop self; n marks "none"
+    _, idx = cKDTree(positions, balanced_tree=False, compact_nodes=False).query(
+        positions, k=k + 1, distance_upper_bound=params.neighbor_dist
+    )
+    if (idx[:, 0] == np.arange(n)).all():  # self first (no other agent at distance 0)
+        idx = idx[:, 1:]
+    else:
+        idx = np.where(idx == np.arange(n)[:, None], n, idx)  # drop self; n marks "none"
+        idx = np.take_along_axis(idx, np.argsort(idx == n, axis=1, kind="stable"), axis=1)[:, :k]
     safe = np.minimum(idx, n - 1)
-    d2 = ((positions[safe] - positions[:, None, :]) ** 2).sum(-1)
-    d2 = np.where(idx < n, d2, np.inf)
-    order = np.lexsort((idx, d2), axis=1)[:, :k]  # the k-d tree's own ties are not RVO2's: re-sort
-    idx, d2 = np.take_along_axis(idx, order, axis=1), np.take_along_axis(d2, order, axis=1)
+    d2 = (positions[safe, 0] - positions[:, None, 0]) ** 2 + (positions[safe, 1] - positions[:, None, 1]) ** 2
+    d2[idx == n] = np.inf
+    later, earlier = d2[:, 1:], d2[:, :-1]
+    if ((later < earlier) | ((later == earlier) & (idx[:, 1:] < idx[:, :-1]))).any():  # ties: by index, as the twin
+        order = np.lexsort((idx, d2), axis=1)
+        idx, d2 = np.take_along_axis(idx, order, axis=1), np.take_along_axis(d2, order, axis=1)
     valid = d2 < range_sq
     return np.where(valid, idx, 0), valid
 
 
 def _agent_lines(positions, velocities, radii, params: OrcaParams):
-    """Agent half-planes ``(px, py, dx, dy, valid)`` each (N, K); unused slots hold the filler line."""
+    """Agent half-planes ``(px, py, dx, dy, valid)`` each (K, N) (slot first); unused slots hold the filler."""
     idx, valid = _agent_neighbours(positions, params)
-    rx = positions[idx, 0] - positions[:, None, 0]
-    ry = positions[idx, 1] - positions[:, None, 1]
-    vx = velocities[:, None, 0] - velocities[idx, 0]
-    vy = velocities[:, None, 1] - velocities[idx, 1]
+    idx, valid = np.ascontiguousarray(idx.T), np.ascontiguousarray(valid.T)
+    x, y, u, v = (np.ascontiguousarray(c) for c in (*positions.T, *velocities.T))
+    rx, ry = x[idx] - x, y[idx] - y
+    vx, vy = u - u[idx], v - v[idx]
     dist_sq = rx * rx + ry * ry
-    r = radii[:, None] + radii[idx]
+    r = radii + radii[idx]
     r_sq = r * r
     apart = dist_sq > r_sq
     # apart: w from the cut-off centre (rel_pos / tau) to the relative velocity; overlapping: from rel_pos / dt
@@ -269,20 +276,15 @@ def _agent_lines(positions, velocities, radii, params: OrcaParams):
     with np.errstate(divide="ignore", invalid="ignore"):
         w_len = np.sqrt(w_sq)
         ux, uy = wx / w_len, wy / w_len
-        leg = np.sqrt(np.where(apart, dist_sq - r_sq, 0.0))
+        leg = np.sqrt(dist_sq - r_sq)  # NaN where overlapping: the circle branch is taken there
         side = np.where(rx * wy - ry * wx > 0.0, 1.0, -1.0)  # +1: left leg, -1: right leg
-        lx = (rx * leg - side * ry * r) / dist_sq
-        ly = (side * rx * r + ry * leg) / dist_sq
-        lx, ly = side * lx, side * ly
+        lx = side * ((rx * leg - side * ry * r) / dist_sq)
+        ly = side * ((side * rx * r + ry * leg) / dist_sq)
     proj = vx * lx + vy * ly
-    dx = np.where(circle, uy, lx)
-    dy = np.where(circle, -ux, ly)
     scale = r * inv - w_len
-    ux_ = np.where(circle, scale * ux, proj * lx - vx)
-    uy_ = np.where(circle, scale * uy, proj * ly - vy)
-    px = velocities[:, None, 0] + 0.5 * ux_
-    py = velocities[:, None, 1] + 0.5 * uy_
-    return (*_fill(px, py, dx, dy, valid), valid)
+    px = u + 0.5 * np.where(circle, scale * ux, proj * lx - vx)
+    py = v + 0.5 * np.where(circle, scale * uy, proj * ly - vy)
+    return (*_fill(px, py, np.where(circle, uy, lx), np.where(circle, -ux, ly), valid), valid)
 
 
 def _fill(px, py, dx, dy, valid):
@@ -351,7 +353,7 @@ def _tangents(rx, ry, r):
 
 
 def _obstacle_lines(positions, velocities, radii, max_speeds, obs: ObstacleSet, params: OrcaParams):
-    """Obstacle half-planes ``(px, py, dx, dy, emitted)`` each (N, M), or None when no agent sees an edge.
+    """Obstacle half-planes ``(px, py, dx, dy, emitted)`` each (M, N), or None when no agent sees an edge.
 
     The first loop of ``computeNewVelocity``, for all (agent, edge) pairs at once; only the "already
     covered by an earlier line" test runs edge slot by edge slot.
@@ -441,24 +443,33 @@ def _obstacle_lines(positions, velocities, radii, max_speeds, obs: ObstacleSet, 
     emitted = emits.copy()
     for k_ in range(1, emitted.shape[1]):
         emitted[:, k_] &= ~(covers[:, :k_, k_] & emitted[:, :k_]).any(1)
-    return (*_fill(px, py, dx, dy, emitted), emitted)
+    return tuple(np.ascontiguousarray(a.T) for a in (*_fill(px, py, dx, dy, emitted), emitted))
 
 
-def _intervals(px, py, dx, dy, radius):
-    """For every line i of every agent, the interval [t_left, t_right] of ``p_i + t d_i`` that the
-    max-speed disc and all other lines allow (``linearProgram1`` over all lines at once); (N, L) each,
-    plus whether it is non-empty."""
+def _pairs(px, py, dx, dy):
+    """``linearProgram1``'s terms for every pair of lines, each (L_j, L_i, M) from (L, M) lines.
+
+    Line j cuts line i at ``p_i + t d_i``; it bounds t from above where det(d_i, d_j) > EPS, from
+    below where it is < -EPS. Lines within ``EPS`` of parallel do not cut: ``bad`` marks those that
+    exclude line i altogether. The other line j comes first, so reductions over it are fast.
+    Returns ``(upper, lower, bad)``.
+    """
+    den = dx[None] * dy[:, None] - dy[None] * dx[:, None]  # [j, i]: det(d_i, d_j)
+    num = dx[:, None] * py[None] - dy[:, None] * px[None]  # det(d_j, p_i - p_j) = det(d_j, p_i) - det(d_j, p_j)
+    num -= (dx * py - dy * px)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = num / den
+    upper = np.where(den > EPS, t, np.inf)
+    lower = np.where(den < -EPS, t, -np.inf)
+    return upper, lower, (np.abs(den) <= EPS) & (num < 0.0)  # j == i: den == num == 0, never bad
+
+
+def _disc(px, py, dx, dy, radius):
+    """Interval of each line inside the max-speed disc: ``(t_left, t_right, non-empty)``, each (L, M)."""
     dot = px * dx + py * dy
-    disc = dot * dot + (radius * radius)[:, None] - (px * px + py * py)
+    disc = dot * dot + radius * radius - (px * px + py * py)
     sq = np.sqrt(np.maximum(disc, 0.0))
-    den = dx[:, :, None] * dy[:, None, :] - dy[:, :, None] * dx[:, None, :]  # det(d_i, d_j)
-    num = dx[:, None, :] * (py[:, :, None] - py[:, None, :]) - dy[:, None, :] * (px[:, :, None] - px[:, None, :])
-    par = np.abs(den) <= EPS  # includes j == i (den == num == 0)
-    t = num / np.where(par, 1.0, den)
-    t_right = np.minimum(np.where(par | (den < 0.0), np.inf, t).min(2), sq - dot)
-    t_left = np.maximum(np.where(par | (den >= 0.0), -np.inf, t).max(2), -sq - dot)
-    ok = (disc >= 0.0) & ~(par & (num < 0.0)).any(2) & (t_left <= t_right)
-    return t_left, t_right, ok
+    return -sq - dot, sq - dot, disc >= 0.0
 
 
 def _violation(px, py, dx, dy, vx, vy):
@@ -466,101 +477,124 @@ def _violation(px, py, dx, dy, vx, vy):
     return dx * (py - vy) - dy * (px - vx)
 
 
-def _lp_closest(px, py, dx, dy, radius, ox, oy):
-    """2-D LP, closest-point mode, loop-free: (vx, vy, feasible), each (N,)."""
-    speed_sq = ox * ox + oy * oy
-    outside = speed_sq > radius * radius
-    with np.errstate(divide="ignore", invalid="ignore"):
-        norm = np.sqrt(speed_sq)
-        v0x = np.where(outside, ox / norm * radius, ox)
-        v0y = np.where(outside, oy / norm * radius, oy)
-    if px.shape[1] == 0:
-        return v0x, v0y, np.ones(len(ox), dtype=bool)
-    ok0 = (_violation(px, py, dx, dy, v0x[:, None], v0y[:, None]) <= 0.0).all(1)
-    t_left, t_right, ok = _intervals(px, py, dx, dy, radius)
-    t = np.clip(dx * (ox[:, None] - px) + dy * (oy[:, None] - py), t_left, t_right)
-    cx, cy = px + t * dx, py + t * dy
-    best = np.argmin(np.where(ok, (cx - ox[:, None]) ** 2 + (cy - oy[:, None]) ** 2, np.inf), axis=1)[:, None]
-    vx = np.where(ok0, v0x, np.take_along_axis(cx, best, 1)[:, 0])
-    vy = np.where(ok0, v0y, np.take_along_axis(cy, best, 1)[:, 0])
-    return vx, vy, ok0 | ok.any(1)
-
-
-def _lp_direction(px, py, dx, dy, radius, ox, oy):
-    """2-D LP, direction mode (furthest along the unit vector o), loop-free: (vx, vy, feasible)."""
-    v0x, v0y = ox * radius, oy * radius
-    ok0 = (_violation(px, py, dx, dy, v0x[:, None], v0y[:, None]) <= 0.0).all(1)
-    t_left, t_right, ok = _intervals(px, py, dx, dy, radius)
-    t = np.where(ox[:, None] * dx + oy[:, None] * dy > 0.0, t_right, t_left)
-    cx, cy = px + t * dx, py + t * dy
-    best = np.argmax(np.where(ok, cx * ox[:, None] + cy * oy[:, None], -np.inf), axis=1)[:, None]
-    vx = np.where(ok0, v0x, np.take_along_axis(cx, best, 1)[:, 0])
-    vy = np.where(ok0, v0y, np.take_along_axis(cy, best, 1)[:, 0])
-    return vx, vy, ok0 | ok.any(1)
-
-
-def _lp_incremental(px, py, dx, dy, radius, ox, oy):
-    """``linearProgram2`` (closest mode) line by line for a few agents: (vx, vy, first failing line)."""
-    n, n_lines = px.shape
+def _clip_to_disc(ox, oy, radius):
     speed_sq = ox * ox + oy * oy
     outside = speed_sq > radius * radius
     norm = np.sqrt(np.where(outside, speed_sq, 1.0))
-    vx, vy = np.where(outside, ox / norm * radius, ox), np.where(outside, oy / norm * radius, oy)
+    return np.where(outside, ox / norm * radius, ox), np.where(outside, oy / norm * radius, oy)
+
+
+def _closest(px, py, dx, dy, t_left, t_right, ok, ox, oy):
+    """Per agent, the point of the best feasible line interval closest to o; (M,) each."""
+    t = np.clip(dx * (ox - px) + dy * (oy - py), t_left, t_right)
+    cx, cy = px + t * dx, py + t * dy
+    best = np.argmin(np.where(ok, (cx - ox) ** 2 + (cy - oy) ** 2, np.inf), axis=0)
+    cols = np.arange(px.shape[1])
+    return cx[best, cols], cy[best, cols]
+
+
+def _lp2(px, py, dx, dy, radius, ox, oy):
+    """``linearProgram2`` (closest to o) for all agents, loop-free: ``(vx, vy, fail)`` each (N,).
+
+    Lines are (L, N). The optimum is unique: o clipped to the disc if that breaks no line, else the
+    point closest to o of some line's interval left by the disc and all other lines -- where RVO2's
+    incremental LP ends too. Where that is empty, ``fail`` is the first line whose prefix of lines
+    is infeasible (else L) and the answer the optimum of the prefix before it, as RVO2 returns it.
+    """
+    n_lines, n = px.shape
+    v0x, v0y = _clip_to_disc(ox, oy, radius)
     fail = np.full(n, n_lines)
-    for i in range(n_lines):
-        rows = np.flatnonzero((fail == n_lines) & (_violation(px[:, i], py[:, i], dx[:, i], dy[:, i], vx, vy) > 0.0))
-        if len(rows) == 0:
-            continue
-        sl = (rows, slice(0, i + 1))
-        t_left, t_right, ok = _intervals_prefix(px[sl], py[sl], dx[sl], dy[sl], radius[rows])
-        pxi, pyi, dxi, dyi = px[rows, i], py[rows, i], dx[rows, i], dy[rows, i]
-        t = np.clip(dxi * (ox[rows] - pxi) + dyi * (oy[rows] - pyi), t_left, t_right)
-        vx[rows] = np.where(ok, pxi + t * dxi, vx[rows])
-        vy[rows] = np.where(ok, pyi + t * dyi, vy[rows])
-        fail[rows[~ok]] = i
+    if n_lines == 0:
+        return v0x, v0y, fail
+    con = np.flatnonzero((_violation(px, py, dx, dy, v0x, v0y) > 0.0).any(axis=0))
+    if len(con) == 0:
+        return v0x, v0y, fail
+    # o (clipped) breaks a line: the answer lies on one of the lines
+    px, py, dx, dy, radius, ox, oy = (a[..., con] for a in (px, py, dx, dy, radius, ox, oy))
+    t_left0, t_right0, in_disc = _disc(px, py, dx, dy, radius)
+    upper, lower, bad = _pairs(px, py, dx, dy)
+    t_right = np.minimum(upper.min(axis=0), t_right0)
+    t_left = np.maximum(lower.max(axis=0), t_left0)
+    ok = in_disc & ~bad.any(axis=0) & (t_left <= t_right)
+    vx, vy = v0x.copy(), v0y.copy()
+    vx[con], vy[con] = _closest(px, py, dx, dy, t_left, t_right, ok, ox, oy)
+    rows = np.flatnonzero(~ok.any(axis=0))
+    if len(rows) == 0:
+        return vx, vy, fail
+    # infeasible agents: line intervals within each prefix of lines 0..k (running min/max over k)
+    upper, lower, bad = upper[:, :, rows], lower[:, :, rows], bad[:, :, rows]
+    for k in range(1, n_lines):
+        np.minimum(upper[k - 1], upper[k], out=upper[k])
+        np.maximum(lower[k - 1], lower[k], out=lower[k])
+        np.logical_or(bad[k - 1], bad[k], out=bad[k])
+    t_right = np.minimum(upper, t_right0[:, rows]).swapaxes(0, 1)  # [i, k, row]
+    t_left = np.maximum(lower, t_left0[:, rows]).swapaxes(0, 1)
+    ok = in_disc[:, None, rows] & ~bad.swapaxes(0, 1) & (t_left <= t_right) & np.tri(n_lines, dtype=bool).T[:, :, None]
+    px, py, dx, dy, ox, oy = (a[..., rows] for a in (px, py, dx, dy, ox, oy))
+    rows = con[rows]
+    first_break = np.argmax(_violation(px, py, dx, dy, v0x[rows], v0y[rows]) > 0.0, axis=0)
+    feasible = (np.arange(n_lines)[:, None] < first_break) | ok.any(axis=0)  # [k, row]
+    fail[rows] = np.argmin(feasible, axis=0)
+    k = np.maximum(fail[rows] - 1, 0)
+    cols = np.arange(len(rows))
+    cx, cy = _closest(px, py, dx, dy, t_left[:, k, cols], t_right[:, k, cols], ok[:, k, cols], ox, oy)
+    use_v0 = fail[rows] <= first_break  # the prefix before the failing line keeps o (clipped)
+    vx[rows] = np.where(use_v0, v0x[rows], cx)
+    vy[rows] = np.where(use_v0, v0y[rows], cy)
     return vx, vy, fail
 
 
-def _intervals_prefix(px, py, dx, dy, radius):
-    """``linearProgram1`` on the last line of (r, i + 1) arrays, bounded by the lines before it."""
-    pxi, pyi, dxi, dyi = px[:, -1:], py[:, -1:], dx[:, -1:], dy[:, -1:]
-    dot = pxi[:, 0] * dxi[:, 0] + pyi[:, 0] * dyi[:, 0]
-    disc = dot * dot + radius * radius - (pxi[:, 0] ** 2 + pyi[:, 0] ** 2)
-    sq = np.sqrt(np.maximum(disc, 0.0))
-    den = (dxi * dy - dyi * dx)[:, :-1]
-    num = (dx * (pyi - py) - dy * (pxi - px))[:, :-1]
-    par = np.abs(den) <= EPS
-    t = num / np.where(par, 1.0, den)
-    t_right = np.minimum(np.where(par | (den < 0.0), np.inf, t).min(1, initial=np.inf), sq - dot)
-    t_left = np.maximum(np.where(par | (den >= 0.0), -np.inf, t).max(1, initial=-np.inf), -sq - dot)
-    return t_left, t_right, (disc >= 0.0) & ~(par & (num < 0.0)).any(1) & (t_left <= t_right)
+def _lp_direction(px, py, dx, dy, radius, ox, oy):
+    """``linearProgram2`` in direction mode (furthest along the unit vector o), loop-free.
+
+    Lines are (L, M). The optimum is o * radius if that breaks no line, else the end along o of some
+    line's interval left by the disc and all other lines. Returns ``(vx, vy, feasible)`` (M,).
+    """
+    v0x, v0y = ox * radius, oy * radius
+    ok0 = (_violation(px, py, dx, dy, v0x, v0y) <= 0.0).all(axis=0)
+    t_left, t_right, ok = _disc(px, py, dx, dy, radius)
+    upper, lower, bad = _pairs(px, py, dx, dy)
+    t_right = np.minimum(upper.min(axis=0), t_right)
+    t_left = np.maximum(lower.max(axis=0), t_left)
+    ok &= ~bad.any(axis=0) & (t_left <= t_right)
+    t = np.where(ox * dx + oy * dy > 0.0, t_right, t_left)
+    cx, cy = px + t * dx, py + t * dy
+    best = np.argmax(np.where(ok, cx * ox + cy * oy, -np.inf), axis=0)
+    cols = np.arange(px.shape[1])
+    return np.where(ok0, v0x, cx[best, cols]), np.where(ok0, v0y, cy[best, cols]), ok0 | ok.any(axis=0)
 
 
 def _lp3(px, py, dx, dy, projectable, n_obst, begin, radius, vx, vy):
     """``linearProgram3`` for agents whose 2-D LP failed at line ``begin`` (r,), all together.
 
-    Obstacle lines (slots < n_obst) stay hard; each agent line j < i is replaced by the line where
-    breaking j and i costs the same. ``projectable`` (r, L) marks agent slots that hold real lines.
+    Lines are (L, r). RVO2 walks the lines from ``begin``; at each line i broken by more than the
+    best so far, it keeps obstacle lines (slots < n_obst) hard, replaces each agent line j < i by the
+    line where breaking j and i costs the same, and takes the velocity furthest into line i. Here
+    every agent jumps straight to its next such line, so the loop runs as many times as the longest
+    such chain (a few), each time one direction-optimising 2-D LP for all agents still going.
+    ``projectable`` (L, r) marks agent slots that hold real lines.
     """
-    n_lines = px.shape[1]
-    distance = np.zeros(len(vx))
-    slots = np.arange(n_lines)
-    for i in range(int(begin.min()), n_lines):
-        viol = _violation(px[:, i], py[:, i], dx[:, i], dy[:, i], vx, vy)
-        rows = np.flatnonzero((i >= begin) & (viol > distance))
+    n_lines, r = px.shape
+    slot = np.arange(n_lines)[:, None]
+    hard = slot < n_obst
+    done = np.full(r, -1)  # last line handled
+    distance = np.zeros(r)
+    while True:
+        todo = (slot > done) & (slot >= begin) & (_violation(px, py, dx, dy, vx, vy) > distance)
+        rows = np.flatnonzero(todo.any(axis=0))
         if len(rows) == 0:
-            continue
-        pix, piy, dix, diy = px[rows, i : i + 1], py[rows, i : i + 1], dx[rows, i : i + 1], dy[rows, i : i + 1]
-        pjx, pjy, djx, djy = px[rows], py[rows], dx[rows], dy[rows]
+            return vx, vy
+        i = np.argmax(todo[:, rows], axis=0)
+        pix, piy, dix, diy = (a[i, rows] for a in (px, py, dx, dy))
+        pjx, pjy, djx, djy = px[:, rows], py[:, rows], dx[:, rows], dy[:, rows]
         det = dix * djy - diy * djx
         par = np.abs(det) <= EPS
-        use = projectable[rows] & (slots >= n_obst) & (slots < i) & ~(par & (dix * djx + diy * djy > 0.0))
+        use = projectable[:, rows] & (slot >= n_obst) & (slot < i) & ~(par & (dix * djx + diy * djy > 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
             s = (djx * (piy - pjy) - djy * (pix - pjx)) / det
+            ex, ey = _normalised(djx - dix, djy - diy)
             qx = np.where(par, 0.5 * (pix + pjx), pix + s * dix)
             qy = np.where(par, 0.5 * (piy + pjy), piy + s * diy)
-            ex, ey = _normalised(djx - dix, djy - diy)
-        hard = slots < n_obst
         lines = _fill(
             np.where(hard, pjx, qx),
             np.where(hard, pjy, qy),
@@ -568,11 +602,11 @@ def _lp3(px, py, dx, dy, projectable, n_obst, begin, radius, vx, vy):
             np.where(hard, djy, ey),
             hard | use,
         )
-        nx, ny, ok = _lp_direction(*lines, radius[rows], -diy[:, 0], dix[:, 0])
+        nx, ny, ok = _lp_direction(*lines, radius[rows], -diy, dix)
         vx[rows] = np.where(ok, nx, vx[rows])
         vy[rows] = np.where(ok, ny, vy[rows])
-        distance[rows] = _violation(pix[:, 0], piy[:, 0], dix[:, 0], diy[:, 0], vx[rows], vy[rows])
-    return vx, vy
+        distance[rows] = _violation(pix, piy, dix, diy, vx[rows], vy[rows])
+        done[rows] = i
 
 
 def orca_step(
@@ -605,32 +639,42 @@ def orca_step(
     speeds = np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (len(pos),))
     if not len(vel) == len(pref) == len(pos):
         raise ValueError("orca_step: positions, velocities and pref_velocities must all be (N, 2)")
-    px, py, dx, dy, real, n_obst = orca_lines(pos, vel, radii, speeds, obstacles, params)
-    vx, vy, ok = _lp_closest(px, py, dx, dy, speeds, pref[:, 0], pref[:, 1])
-    bad = np.flatnonzero(~ok)
+    px, py, dx, dy, real, n_obst = _lines(pos, vel, radii, speeds, obstacles, params)
+    vx, vy, fail = _lp2(px, py, dx, dy, speeds, pref[:, 0], pref[:, 1])
+    bad = np.flatnonzero(fail < px.shape[0])
     if len(bad):
-        sub = [a[bad] for a in (px, py, dx, dy)]
-        bx, by, fail = _lp_incremental(*sub, speeds[bad], pref[bad, 0], pref[bad, 1])
-        projectable = real[bad] & (np.arange(px.shape[1]) >= n_obst)
-        vx[bad], vy[bad] = _lp3(*sub, projectable, n_obst, fail, speeds[bad], bx, by)
+        projectable = real[:, bad] & (np.arange(px.shape[0]) >= n_obst)[:, None]
+        sub = [a[:, bad] for a in (px, py, dx, dy)]
+        vx[bad], vy[bad] = _lp3(*sub, projectable, n_obst, fail[bad], speeds[bad], vx[bad], vy[bad])
     return np.stack([vx, vy], axis=1)
 
 
 def orca_lines(positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams):
     """All ORCA half-planes of all agents, in RVO2's order (obstacle lines, then agent lines).
 
-    A velocity v is allowed by line (p, d) when det(d, p - v) <= 0 (v on the left of d).
+    A velocity v is allowed by line (p, d) when det(d, p - v) <= 0 (v on the left of d). Arguments
+    as :func:`orca_step`.
 
     Returns:
         ``(px, py, dx, dy, real, n_obst)``: (N, L) float64 points (m/s) and unit directions, (N, L)
         bool marking slots that hold a line (the others hold an always-satisfied filler), and the
         number of obstacle slots (they come first).
     """
-    *agent, valid = _agent_lines(positions, velocities, radii, params)
+    pos = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    vel = np.asarray(velocities, dtype=np.float64).reshape(-1, 2)
+    radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(pos),))
+    speeds = np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (len(pos),))
+    *lines, n_obst = _lines(pos, vel, radii, speeds, obstacles, params)
+    return (*(a.T for a in lines), n_obst)
+
+
+def _lines(pos, vel, radii, speeds, obstacles: ObstacleSet | None, params: OrcaParams):
+    """:func:`orca_lines` with slot-first (L, N) arrays, as the LPs use them."""
+    *agent, valid = _agent_lines(pos, vel, radii, params)
     obst = None
-    if obstacles is not None and obstacles.n_vertices and len(positions):
-        obst = _obstacle_lines(positions, velocities, radii, max_speeds, obstacles, params)
+    if obstacles is not None and obstacles.n_vertices and len(pos):
+        obst = _obstacle_lines(pos, vel, radii, speeds, obstacles, params)
     if obst is None:
         return (*agent, valid, 0)
-    merged = [np.concatenate(pair, axis=1) for pair in zip(obst, (*agent, valid), strict=True)]
-    return (*merged, obst[0].shape[1])
+    merged = [np.concatenate(pair, axis=0) for pair in zip(obst, (*agent, valid), strict=True)]
+    return (*merged, obst[0].shape[0])
