@@ -40,7 +40,7 @@ from song.geometry.ik import two_bone_ik
 from song.geometry.rotations import matrix_to_quat, quat_slerp, quat_to_matrix, rot_x, rot_y, rot_z, wrap_angle
 from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import rest_joints
-from song.pipeline.motion.types import Motion, Trajectory
+from song.pipeline.motion.types import Motion, Trajectory, body_heading
 
 SWING = 0.8  # swing length in step units (40 % of a 2-step stride)
 REST_PHASE = 0.9  # the phase rests in the middle of a double support (s mod 1 = 0.9)
@@ -133,7 +133,7 @@ class _Plan:
 def _plan_signals(traj: Trajectory) -> _Plan:
     t = traj.t
     dt = 1.0 / traj.fps
-    heading = gaussian_filter1d(np.unwrap(traj.yaw), 2.0, mode="nearest")
+    heading = gaussian_filter1d(body_heading(traj.yaw, t), 2.0, mode="nearest")
     if len(t) > 1:
         vel = np.gradient(traj.xy, t, axis=0)
         speed = gaussian_filter1d(np.linalg.norm(vel, axis=1), 2.0, mode="nearest")

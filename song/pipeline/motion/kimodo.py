@@ -42,7 +42,7 @@ from song.geometry.fk import global_to_local
 from song.geometry.rotations import matrix_to_quat, rot_z
 from song.geometry.skeleton import JOINT_NAMES, rest_joints
 from song.pipeline.motion.generators import style_for
-from song.pipeline.motion.types import Motion, Trajectory
+from song.pipeline.motion.types import Motion, Trajectory, body_heading
 
 ENCODER_PRESET = "song-cached"
 # world-canonical (x' forward, y' left, z up) → Kimodo (X, Y up, Z forward): X = y', Y = z, Z = x'
@@ -231,7 +231,7 @@ def canonicalize(traj: Trajectory, t: np.ndarray) -> dict[str, np.ndarray]:
     """
     x = np.interp(t, traj.t, traj.xy[:, 0])
     y = np.interp(t, traj.t, traj.xy[:, 1])
-    yaw = np.interp(t, traj.t, np.unwrap(traj.yaw))
+    yaw = np.interp(t, traj.t, body_heading(traj.yaw, traj.t))
     origin = np.array([x[0], y[0]])
     yaw0 = float(yaw[0])
     c, s = math.cos(-yaw0), math.sin(-yaw0)
@@ -293,12 +293,13 @@ class KimodoGenerator:
 
         constraints = importlib.import_module("kimodo.constraints")
         n = len(canon["root_2d"])
+        device = getattr(model, "device", None) or "cpu"
         heading = np.stack([np.cos(canon["heading"]), np.sin(canon["heading"])], axis=-1)
         return constraints.Root2DConstraintSet(
             model.skeleton,
-            torch.arange(n),
-            torch.as_tensor(canon["root_2d"], dtype=torch.float32),
-            global_root_heading=torch.as_tensor(heading, dtype=torch.float32),
+            torch.arange(n, device=device),
+            torch.as_tensor(canon["root_2d"], dtype=torch.float32, device=device),
+            global_root_heading=torch.as_tensor(heading, dtype=torch.float32, device=device),
         )
 
     def generate(
@@ -370,7 +371,8 @@ class KimodoGenerator:
         glob = undo @ m.T @ rots @ m
         style = style_for(own_seed, self.cfg)
         rest = rest_joints(style.height_m)
-        neutral = np.asarray(skeleton.neutral_joints, dtype=np.float64)
+        neutral = skeleton.neutral_joints
+        neutral = np.asarray(neutral.detach().cpu() if hasattr(neutral, "detach") else neutral, dtype=np.float64)
         soma_pelvis = neutral[names.index("Hips"), 1] - neutral[:, 1].min()
         root = (undo @ (m.T @ root_k.T)).T
         root[:, :2] += canon["origin"]

@@ -11,6 +11,27 @@ from song.errors import InputError
 from song.geometry.fk import forward_kinematics
 
 FPS = 30.0
+MAX_TURN_RATE = 4.0  # rad/s: a body turns at most this fast (≈ 180° in 0.8 s); plans may flip yaw in one frame
+
+
+def body_heading(yaw: np.ndarray, t: np.ndarray, max_rate: float = MAX_TURN_RATE) -> np.ndarray:
+    """Unwrapped body heading ``(T,)`` radians that follows the planned yaw at a bounded turn rate.
+
+    The rate limiter runs forwards and backwards and the two are averaged, so a yaw flip in the plan
+    becomes a turn centred on it (the average of two rate-limited signals is rate-limited too).
+    """
+    target = np.unwrap(np.asarray(yaw, dtype=np.float64))
+    if len(target) < 2:
+        return target
+    steps = (max_rate * np.diff(np.asarray(t, dtype=np.float64))).tolist()
+    values = target.tolist()
+    forward = values[:]
+    for i in range(1, len(values)):
+        forward[i] = forward[i - 1] + min(max(values[i] - forward[i - 1], -steps[i - 1]), steps[i - 1])
+    backward = values[:]
+    for i in range(len(values) - 2, -1, -1):
+        backward[i] = backward[i + 1] + min(max(values[i] - backward[i + 1], -steps[i]), steps[i])
+    return 0.5 * (np.asarray(forward) + np.asarray(backward))
 
 
 @dataclass(frozen=True)

@@ -141,3 +141,27 @@ def test_single_frame_and_reverse_heading():
     back = trajectory_from_profiles(4, np.full(120, 0.8), np.zeros(120), start=(0.0, 0.0, np.pi))
     final, _ = postprocess(ProceduralGait(CFG).generate([back], [""], [2])[0], back)
     assert final.joints[-1, 0, 0] < -2.0  # walked along −x
+
+
+def test_yaw_flips_in_the_plan_become_bounded_turns():
+    from song.pipeline.motion.types import MAX_TURN_RATE, Trajectory, body_heading
+
+    n = 150
+    t = np.arange(n) / 30.0
+    yaw = np.where(np.arange(n) < 75, 0.0, np.pi - 0.01)  # a one-frame flip, as crowd plans have
+    heading = body_heading(yaw, t)
+    assert np.abs(np.diff(heading)).max() * 30 <= MAX_TURN_RATE + 1e-9
+    assert heading[0] == 0.0 and heading[-1] == pytest.approx(np.pi - 0.01)
+    assert heading[74] == pytest.approx(0.5 * (np.pi - 0.01), abs=0.15)  # centred on the flip
+    slow = 0.5 * t
+    assert np.allclose(body_heading(slow, t), slow)
+    traj = Trajectory(
+        ped_id=0, t=t, frame=np.arange(n, dtype=np.int32), xy=np.zeros((n, 2)), yaw=yaw, speed=np.zeros(n)
+    )
+    final, _ = postprocess(ProceduralGait(CFG).generate([traj], [""], [1])[0], traj)
+    joints = final.joints
+    assert np.linalg.norm(np.diff(joints, axis=0), axis=-1).max() < 0.1
+    q = motion_quality(
+        joints, final.local_quats, final.rest_joints, final.contacts, final.t, traj.xy, traj.speed, 0.38, 85
+    )
+    assert q["foot_skating_ratio"] <= 0.02
