@@ -89,6 +89,13 @@ def write_npz_atomic(path: str | Path, **arrays: np.ndarray) -> None:
     write_bytes_atomic(path, buffer.getvalue())
 
 
+def write_npz_compressed_atomic(path: str | Path, **arrays: np.ndarray) -> None:
+    """Atomically write a deflated ``.npz`` (``np.load`` reads it as usual); bytes depend only on the arrays."""
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    write_bytes_atomic(path, buffer.getvalue())
+
+
 def derive_seed(*parts: object) -> int:
     """A 64-bit seed from a hash of ``parts`` (run seed, scene id, stage name, item id, ...).
 

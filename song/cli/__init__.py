@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "song.cli.intents",
     "song.cli.crowd",
     "song.cli.motion",
+    "song.cli.bind",
     "song.cli.avatars",
     "song.cli.grade",
     "song.cli.bench",

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from song.datasets.avatars.asset import load_avatar
+from song.datasets.avatars.cache import PosedAvatar, load_compact_cache
 from song.datasets.bench.types import PedestrianTrack, pedestrian_states
 
 AVATAR_REACH_M = 1.0  # horizontal root-to-fingertip reach of a 1.95 m adult in T-pose is ≈ 0.95 m
@@ -109,5 +111,27 @@ def make_collider(episode, config) -> AvatarCollider:
 
 
 def gaussian_poser(episode) -> Callable[[int, float], np.ndarray] | None:
-    """Pose the release's avatar Gaussians with LBS (filled in when the binding format is known)."""
-    return None
+    """Pose each pedestrian's avatar Gaussians by LBS from its compact cache (body proxy where it has none).
+
+    Assets and caches are read on a pedestrian's first query (most never come near the robot) and kept
+    for the episode. Returns None when no pedestrian has an avatar cache.
+    """
+    bindings = {b.ped_id: b for b in episode.avatars if b.cache_path is not None and b.asset_path is not None}
+    if not bindings:
+        return None
+    tracks = episode.pedestrians
+    proxy = proxy_poser(tracks)
+    posed: dict[int, PosedAvatar | None] = {}
+
+    def pose(index: int, t: float) -> np.ndarray:
+        if index not in posed:
+            binding = bindings.get(tracks[index].ped_id)
+            posed[index] = (
+                PosedAvatar.load(load_avatar(binding.asset_path), load_compact_cache(binding.cache_path))
+                if binding is not None
+                else None
+            )
+        avatar = posed[index]
+        return proxy(index, t) if avatar is None else avatar.means_at(t)
+
+    return pose

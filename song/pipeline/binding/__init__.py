@@ -1,0 +1,8 @@
+"""Binding stage: avatar identities and linear-blend-skinning caches per pedestrian (DESIGN §5.4)."""
+
+from song.pipeline.binding.stage import bind_motion, run_binding, sample_identities
+from song.pipeline.chain import Stage, register_stage
+
+register_stage(Stage(name="binding", run=run_binding, depends=("motion",), config_section="binding"))
+
+__all__ = ["bind_motion", "run_binding", "sample_identities"]

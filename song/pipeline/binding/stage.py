@@ -1,0 +1,107 @@
+"""The binding stage: motion → avatar identity + LBS cache per pedestrian (DESIGN §5.4, §7).
+
+Per scene: every pedestrian with a motion (``human_amass/traj_{id}/motion.npz``) gets an identity from
+the pool, drawn with the scene's seeded generator (a fresh permutation of the pool each time it runs
+out, so no identity repeats within a scene while the pool allows), uniformly scaled to the motion's
+body height (the root alignment: ``diag(s, s, s, 1)``, recorded). Outputs under ``binding/``:
+``traj_{id}.npz`` (compact cache), ``traj_{id}.materialized.npz`` when ``binding.materialize``, and
+``bindings.json`` (contract in docs/contracts.md).
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from song.datasets.avatars.asset import AvatarAsset, load_avatar
+from song.datasets.avatars.cache import MotionCache, write_compact_cache, write_materialized_cache
+from song.pipeline.binding.pool import ensure_pool
+from song.pipeline.chain import StageContext
+from song.pipeline.motion.io import AMASS_DIR, LoadedMotion, load_motion
+from song.util import write_json_atomic
+
+BINDING_DIR = "binding"
+BINDINGS_FILE = "bindings.json"
+
+
+def sample_identities(n: int, pool_size: int, rng: np.random.Generator) -> list[int]:
+    """``n`` pool indices: successive random permutations of the pool, so repeats only once it is used up."""
+    order: list[int] = []
+    while len(order) < n:
+        order += rng.permutation(pool_size).tolist()
+    return order[:n]
+
+
+def _motions(scene_dir: Path) -> list[LoadedMotion]:
+    folders = sorted((scene_dir / AMASS_DIR).glob("traj_*"), key=lambda p: int(p.name.split("_")[1]))
+    return [load_motion(folder) for folder in folders if (folder / "motion.npz").exists()]
+
+
+def bind_motion(asset: AvatarAsset, motion: LoadedMotion, fps: float) -> tuple[AvatarAsset, MotionCache]:
+    """Scale ``asset`` to the motion's height and build its motion cache (rest skeleton = the scaled avatar's)."""
+    scale = float(motion.height_m) / asset.height_m
+    scaled = asset.scaled(scale)
+    alignment = np.diag([scale, scale, scale, 1.0])
+    meta: dict[str, Any] = {
+        "ped_id": int(motion.meta.get("ped_id", -1)),
+        "avatar_id": asset.avatar_id,
+        "avatar_sha256": asset.meta.get("sha256", ""),
+        "height_m": round(float(motion.height_m), 6),
+        "scale": scale,
+        "alignment": alignment.ravel().tolist(),
+        "fps": fps,
+        "frame0": int(motion.frame[0]),
+        "skeleton_mismatch_m": round(float(np.abs(scaled.rest_joints - motion.rest_joints).max()), 6),
+    }
+    cache = MotionCache(
+        motion.root_pos.astype(np.float32),
+        motion.local_quats.astype(np.float32),
+        scaled.rest_joints.astype(np.float32),
+        fps,
+        int(motion.frame[0]),
+        meta,
+    )
+    return scaled, cache
+
+
+def run_binding(ctx: StageContext) -> list[str]:
+    """Stage entry: bind every pedestrian's motion to an avatar and write its caches."""
+    cfg = ctx.config.binding
+    pool = ensure_pool(cfg)
+    motions = _motions(ctx.scene_dir)
+    out_dir = ctx.scene_dir / BINDING_DIR
+    if out_dir.exists():
+        shutil.rmtree(out_dir)  # a rerun replaces the whole folder (no stale caches of removed pedestrians)
+    out_dir.mkdir(parents=True)
+    picks = sample_identities(len(motions), len(pool), ctx.rng("identity"))
+    assets: dict[int, AvatarAsset] = {}
+    entries, written = [], []
+    for motion, pick in zip(motions, picks, strict=True):
+        asset = assets.setdefault(pick, load_avatar(pool[pick]))
+        scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)))
+        ped_id = cache.meta["ped_id"]
+        cache_file = f"{BINDING_DIR}/traj_{ped_id}.npz"
+        write_compact_cache(
+            ctx.scene_dir / cache_file, cache.root_pos, cache.local_quats, cache.rest_joints, cache.meta
+        )
+        entry = {
+            "ped_id": ped_id,
+            "avatar_id": asset.avatar_id,
+            "asset_path": str(pool[pick].resolve()),
+            "asset_sha256": asset.meta.get("sha256", ""),
+            "cache_file": cache_file,
+            "height_m": cache.meta["height_m"],
+            "scale": cache.meta["scale"],
+        }
+        written.append(cache_file)
+        if cfg.materialize:
+            materialized = f"{BINDING_DIR}/traj_{ped_id}.materialized.npz"
+            write_materialized_cache(ctx.scene_dir / materialized, scaled, cache)
+            entry["materialized_file"] = materialized
+            written.append(materialized)
+        entries.append(entry)
+    write_json_atomic(out_dir / BINDINGS_FILE, {"pedestrians": entries, "pool_size": len(pool)})
+    return [*written, f"{BINDING_DIR}/{BINDINGS_FILE}"]

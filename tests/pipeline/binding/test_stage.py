@@ -1,0 +1,108 @@
+"""The binding stage on real motions: contract, identity sampling, caches that follow the motion."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.config import BindingConfig, SongConfig
+from song.datasets.avatars import load_avatar, save_avatar
+from song.datasets.avatars.cache import (
+    PosedAvatar,
+    load_compact_cache,
+    load_materialized_cache,
+    skin_asset,
+)
+from song.datasets.scenes import load_scene_package
+from song.geometry.lbs import lbs
+from song.geometry.skeleton import JOINT_INDEX
+from song.pipeline.binding import run_binding, sample_identities
+from song.pipeline.chain import StageContext
+from song.pipeline.motion import load_motion, run_motion
+from tests.avatar_factory import capsule_avatar
+from tests.pipeline.motion.test_stage import write_crowd
+
+
+@pytest.fixture(scope="module")
+def pool(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("pool")
+    for i, height in enumerate((1.6, 1.75, 1.9, 1.7)):
+        save_avatar(capsule_avatar(f"cap{i}", n=2500, height=height, seed=i), folder)
+    return folder
+
+
+def _bound(make_scene, root: Path, pool: Path, materialize: bool = False) -> StageContext:
+    scene = load_scene_package(make_scene())
+    config = SongConfig(seed=5, binding=BindingConfig(avatars_dir=str(pool), materialize=materialize))
+    scene_dir = root / "run" / "scenes" / scene.scene_id
+    write_crowd(scene_dir)
+    run_motion(StageContext(scene, scene_dir, root / "run", config, "motion"))
+    ctx = StageContext(scene, scene_dir, root / "run", config, "binding")
+    run_binding(ctx)
+    return ctx
+
+
+def test_contract_identities_and_determinism(make_scene, tmp_path, pool) -> None:
+    ctx = _bound(make_scene, tmp_path / "a", pool)
+    bindings = json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]
+    assert [b["ped_id"] for b in bindings] == [0, 1, 2]
+    assert len({b["avatar_id"] for b in bindings}) == 3  # no repeats while the pool allows
+    for b in bindings:
+        motion = load_motion(ctx.scene_dir / "human_amass" / f"traj_{b['ped_id']}")
+        cache = load_compact_cache(ctx.scene_dir / b["cache_file"])
+        asset = load_avatar(b["asset_path"])
+        assert b["asset_sha256"] == asset.meta["sha256"]
+        assert cache.meta["scale"] == pytest.approx(motion.height_m / asset.height_m)
+        assert len(cache) == len(motion.t) and cache.frame0 == int(motion.frame[0])
+        np.testing.assert_allclose(cache.rest_joints, motion.rest_joints, atol=1e-5)
+    again = _bound(make_scene, tmp_path / "b", pool)
+    for name in sorted(p.name for p in (ctx.scene_dir / "binding").iterdir()):
+        assert (ctx.scene_dir / "binding" / name).read_bytes() == (again.scene_dir / "binding" / name).read_bytes()
+
+
+def test_identity_sampling_cycles_through_permutations() -> None:
+    rng = np.random.default_rng(0)
+    picks = sample_identities(10, 4, rng)
+    assert sorted(picks[:4]) == [0, 1, 2, 3] and sorted(picks[4:8]) == [0, 1, 2, 3]
+
+
+def _dominant(asset, joint: str) -> np.ndarray:
+    return (asset.skin_indices[:, 0] == JOINT_INDEX[joint]) & (asset.skin_weights[:, 0] > 0.95)
+
+
+def test_avatar_stands_on_the_floor_and_feet_follow_the_foot_joints(make_scene, tmp_path, pool) -> None:
+    ctx = _bound(make_scene, tmp_path, pool)
+    for b in json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]:
+        motion = load_motion(ctx.scene_dir / "human_amass" / f"traj_{b['ped_id']}")
+        cache = load_compact_cache(ctx.scene_dir / b["cache_file"])
+        asset = load_avatar(b["asset_path"]).scaled(cache.meta["scale"])
+        avatar = PosedAvatar.load(load_avatar(b["asset_path"]), cache)
+        frames = np.arange(0, len(motion.t), 7)
+        for joint in ("left_ankle", "right_ankle"):
+            mask = _dominant(asset, joint)
+            rest_offset = np.linalg.norm(asset.gaussians.means[mask] - asset.rest_joints[JOINT_INDEX[joint]], axis=1)
+            for f in frames:
+                posed = avatar.means_at(float(motion.t[f]))[mask]
+                offset = np.linalg.norm(posed - motion.joints[f, JOINT_INDEX[joint]], axis=1)
+                assert np.abs(offset - rest_offset).max() <= 0.03
+        standing = avatar.means_at(float(motion.t[0]))
+        assert abs(float(standing[:, 2].min())) <= 0.03
+
+
+def test_compact_and_materialized_pose_alike(make_scene, tmp_path, pool) -> None:
+    ctx = _bound(make_scene, tmp_path, pool, materialize=True)
+    for b in json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]:
+        cache = load_compact_cache(ctx.scene_dir / b["cache_file"])
+        materialized = load_materialized_cache(ctx.scene_dir / b["materialized_file"])
+        skin = skin_asset(load_avatar(b["asset_path"]).scaled(cache.meta["scale"]))
+        for f in range(0, len(cache), 11):
+            t = (cache.frame0 + f) / cache.fps
+            means, quats = lbs(skin, cache.transforms_at(t))
+            m_means, m_quats = materialized.pose(t)
+            near = np.linalg.norm(means - cache.root_pos[f], axis=1) <= 3.0
+            assert np.abs(means - m_means)[near].max() <= 0.002
+            dots = np.abs((quats * m_quats).sum(-1)).clip(0, 1)
+            assert np.degrees(2 * np.arccos(dots)).max() <= 0.5
