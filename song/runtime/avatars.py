@@ -27,11 +27,13 @@ def count_inside_volume(
     """Number of points (M, 3) inside the robot's collision volume at ``robot_xy``."""
     if len(points) == 0:
         return 0
-    horizontal = ((points[:, :2] - robot_xy) ** 2).sum(axis=1)
+    dx, dy, z = points[:, 0] - robot_xy[0], points[:, 1] - robot_xy[1], points[:, 2]
+    horizontal = dx * dx + dy * dy  # per-column arithmetic: no (M, 2) temporaries or short-axis reductions
     if volume == "sphere":
-        return int(np.count_nonzero(horizontal + (points[:, 2] - height) ** 2 < radius**2))
+        dz = z - height
+        return int(np.count_nonzero(horizontal + dz * dz < radius**2))
     if volume == "cylinder":
-        return int(np.count_nonzero((horizontal < radius**2) & (points[:, 2] >= 0.0) & (points[:, 2] <= 2 * height)))
+        return int(np.count_nonzero((horizontal < radius**2) & (z >= 0.0) & (z <= 2 * height)))
     raise ValueError(f"unknown collision volume {volume!r}; expected 'sphere' or 'cylinder'")
 
 
