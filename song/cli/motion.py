@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import typer
@@ -22,11 +21,6 @@ def motion(
     workers: int = typer.Option(0, "--workers", "-j", min=0, help="worker processes (0 = all cores)"),
 ) -> None:
     """Full-body motion for each pedestrian (needs crowd); writes RUN/scenes/<id>/human_amass/."""
-    # `song synth` runs motion once it joins chain.STAGE_MODULES; until then name it as a plugin so that
-    # worker processes register it too.
-    plugins = [name for name in os.environ.get("SONG_STAGE_PLUGINS", "").split(",") if name.strip()]
-    if "song.pipeline.motion" not in plugins:
-        os.environ["SONG_STAGE_PLUGINS"] = ",".join([*plugins, "song.pipeline.motion"])
     scenes_dir, config = read_run(run)
     if generator is not None:
         if generator not in ("procedural", "kimodo", "auto"):

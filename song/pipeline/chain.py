@@ -35,11 +35,11 @@ from song.util import derive_rng, sha256_file, sha256_json, write_json_atomic
 STAGES_FILE = "stages.json"
 RUN_FILE = "run.json"
 SCENES_DIR = "scenes"
-# Stages that `song synth` runs, in pipeline order. Motion and binding (issues #5, #6) join this list
-# when they land together with end-to-end tests; until then a module of theirs is not run by synth.
+# Stages that `song synth` runs, in pipeline order (each module registers its stage on import).
 STAGE_MODULES = (
     "song.pipeline.intents",
     "song.pipeline.crowd",
+    "song.pipeline.motion",
 )
 PIPELINE_ORDER = ("intents", "crowd", "motion", "binding")
 
