@@ -26,9 +26,10 @@ def export_bench_command(
     version: str = typer.Option(..., "--version", help="new version X.Y.Z (never overwritten)"),
     parent: str | None = typer.Option(None, "--parent", help="the version this one derives from"),
     notes: str = typer.Option("", "--notes", help="changelog text"),
+    amass: bool = typer.Option(False, "--amass", help="also ship each pedestrian's AMASS motion file"),
 ) -> None:
     """Write an immutable, versioned Parquet release of a graded run."""
-    result = export_bench(run, bench, version, parent, notes)
+    result = export_bench(run, bench, version, parent, notes, amass)
     console.print(
         f"released {result.path}: {result.n_episodes} episodes, {result.n_bytes / 1e6:.1f} MB, "
         f"fingerprint {result.fingerprint[:16]}"

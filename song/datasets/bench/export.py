@@ -129,7 +129,9 @@ def _read_json(path: Path) -> dict[str, Any]:
         return {}
 
 
-def _avatar_rows(run_dir: Path, scene_id: str, ped_ids: list[int], blobs: BlobStore) -> list[dict[str, Any]]:
+def _avatar_rows(
+    run_dir: Path, scene_id: str, ped_ids: list[int], blobs: BlobStore, amass: bool
+) -> list[dict[str, Any]]:
     scene_dir = run_dir / "scenes" / scene_id
     intents = {item["id"]: item for item in _read_json(scene_dir / "intents.json").get("intents", [])}
     bindings = {
@@ -151,7 +153,7 @@ def _avatar_rows(run_dir: Path, scene_id: str, ped_ids: list[int], blobs: BlobSt
                 "height_m": binding.get("height_m", meta.get("height_m")),
                 "cache": blobs.add(scene_dir / binding["cache_file"]) if "cache_file" in binding else None,
                 "asset": blobs.add(Path(asset)) if asset else None,
-                "amass": blobs.add(amass_dir / "motion_amass.npz"),
+                "amass": blobs.add(amass_dir / "motion_amass.npz") if amass else None,
                 "materialized": blobs.add(scene_dir / materialized) if materialized else None,
             }
         )
@@ -222,9 +224,17 @@ def _changelog(version: str, parent: str | None, notes: str, counts: dict[str, A
 
 
 def export_bench(
-    run_dir: str | Path, bench_dir: str | Path, version: str, parent: str | None = None, notes: str = ""
+    run_dir: str | Path,
+    bench_dir: str | Path,
+    version: str,
+    parent: str | None = None,
+    notes: str = "",
+    amass: bool = False,
 ) -> ExportResult:
     """Write ``bench_dir/version/`` from a graded run; refuses an existing version.
+
+    ``amass`` also ships each pedestrian's AMASS motion file (about 0.5 MB per pedestrian-minute; the
+    runtime needs only the avatar assets and compact LBS caches, which are always included).
 
     Raises:
         BenchmarkError: bad version string, existing version, missing parent, or missing run outputs.
@@ -253,7 +263,7 @@ def export_bench(
         for scene_id in scene_ids:
             mask = pc.equal(pedestrians.column("scene_id"), scene_id)
             ped_ids = sorted(set(pedestrians.filter(mask).column("ped_id").to_pylist()))
-            avatar_rows += _avatar_rows(run_dir, scene_id, ped_ids, blobs)
+            avatar_rows += _avatar_rows(run_dir, scene_id, ped_ids, blobs, amass)
             scene_rows.append(_scene_row(scenes_dir, scene_id, blobs))
         tables = {
             "episodes": (EPISODES_PATH.format(part=0), episodes, EPISODES),

@@ -106,3 +106,21 @@ def test_compact_and_materialized_pose_alike(make_scene, tmp_path, pool) -> None
             assert np.abs(means - m_means)[near].max() <= 0.002
             dots = np.abs((quats * m_quats).sum(-1)).clip(0, 1)
             assert np.degrees(2 * np.arccos(dots)).max() <= 0.5
+
+
+def test_release_rows_reference_the_binding(make_scene, tmp_path, pool) -> None:
+    from song.datasets.bench.export import _avatar_rows
+    from song.datasets.bench.io import BlobStore
+    from song.util import sha256_file
+
+    ctx = _bound(make_scene, tmp_path, pool)
+    for amass in (False, True):
+        store = BlobStore(tmp_path / f"release-{amass}")
+        rows = _avatar_rows(ctx.run_dir, ctx.scene_id, [0, 1, 2], store, amass)
+        for row in rows:
+            cache = load_compact_cache(store.root / row["cache"]["path"])
+            assert cache.meta["ped_id"] == row["ped_id"] and cache.meta["avatar_id"] == row["avatar_id"]
+            asset = load_avatar(store.root / row["asset"]["path"])
+            assert asset.meta["sha256"] == cache.meta["avatar_sha256"]
+            assert row["cache"]["sha256"] == sha256_file(store.root / row["cache"]["path"])
+            assert (row["amass"] is not None) == amass
