@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -60,6 +61,12 @@ def build_two_room_scene(root: Path, scene_id: str = "tiny", resolution: float =
         ],
     )
     return write_scene_package(root / scene_id, smap, cells)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_song_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Generated avatar pools go to a scratch cache, never to the user's ~/.cache (inherited by subprocesses)."""
+    os.environ["SONG_CACHE_DIR"] = str(tmp_path_factory.mktemp("song_cache"))
 
 
 @pytest.fixture

@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "song.cli.motion",
     "song.cli.bind",
     "song.cli.avatars",
+    "song.cli.avatars",
     "song.cli.grade",
     "song.cli.bench",
     "song.cli.eval",

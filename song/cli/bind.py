@@ -32,9 +32,6 @@ def bind(
     if avatars is not None:
         update["avatars_dir"] = str(avatars.resolve())
     config = config.model_copy(update={"binding": config.binding.model_copy(update=update)})
-    from song.pipeline.binding.pool import ensure_pool
-
-    ensure_pool(config.binding)  # build the default pool once, before the workers start
     scene_ids = [scene] if scene else None
     results = run_chain_command(
         scenes_dir, run, config, ["binding"], workers or default_workers(), "process", None, False, scene_ids

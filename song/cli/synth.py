@@ -34,6 +34,10 @@ def run_chain_command(
 ) -> list[SceneResult]:
     """Run the chain with a progress display (or JSON lines when ``quiet``) and print the summary."""
     names = stage_names or [stage.name for stage in load_stages()]
+    if "binding" in names:
+        from song.pipeline.binding.pool import ensure_pool
+
+        ensure_pool(cfg.binding)  # build the default avatar pool once, before the workers start
     results: list[SceneResult] = []
     started = time.perf_counter()
     iterator = iter_run(

@@ -40,6 +40,7 @@ STAGE_MODULES = (
     "song.pipeline.intents",
     "song.pipeline.crowd",
     "song.pipeline.motion",
+    "song.pipeline.binding",
 )
 PIPELINE_ORDER = ("intents", "crowd", "motion", "binding")
 

@@ -1,0 +1,61 @@
+"""``song avatars build|import``: the avatar pool."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from song.cli import app
+from song.cli.common import console, handle_errors, status_table
+
+avatars_app = typer.Typer(help="Gaussian avatars: build a procedural pool, import a 3DGS PLY.", no_args_is_help=True)
+app.add_typer(avatars_app, name="avatars")
+
+
+def _row(asset) -> dict:
+    gen = asset.meta.get("generator", {})
+    clothing = "dress" if gen.get("dress") else f"{gen.get('top', '')} / {gen.get('bottom', '')}".strip(" /")
+    return {
+        "id": asset.avatar_id,
+        "height m": f"{asset.height_m:.2f}",
+        "clothing": f"{clothing} {gen.get('pattern', '')}".strip(),
+        "hair": gen.get("hair", ""),
+        "gaussians": f"{len(asset):,}",
+    }
+
+
+@avatars_app.command("build")
+@handle_errors
+def build(
+    out: Path = typer.Option(..., "--out", help="pool folder to write *.avatar.npz into"),
+    count: int = typer.Option(32, "--count", min=1, help="identities"),
+    seed: int = typer.Option(0, "--seed", help="pool seed (avatar i depends only on seed and i)"),
+    gaussians: int = typer.Option(20_000, "--gaussians", min=5_000, max=100_000, help="Gaussians per avatar"),
+) -> None:
+    """Generate procedural identities (parametric body, clothing, hair, skin tone)."""
+    from song.datasets.avatars import load_avatar
+    from song.datasets.avatars.generate import build_pool
+
+    paths = build_pool(out, count, seed, gaussians)
+    rows = [_row(load_avatar(path)) for path in paths]
+    console.print(status_table(f"{len(paths)} avatars in {out}", rows, list(rows[0])))
+
+
+@avatars_app.command("import")
+@handle_errors
+def import_command(
+    ply: Path = typer.Argument(..., help="standard or compressed 3DGS PLY of a person in a canonical pose"),
+    out: Path = typer.Option(..., "--out", help="pool folder"),
+    avatar_id: str = typer.Option(None, "--id", help="identity id (default: the file stem)"),
+    height: float = typer.Option(1.75, "--height", min=0.5, max=2.5, help="body height to scale to, m"),
+    up: str = typer.Option(None, "--up", help="source up axis, e.g. +y (detected when omitted)"),
+    forward: str = typer.Option(None, "--forward", help="source forward axis, e.g. +z (detected when omitted)"),
+) -> None:
+    """Import a real Gaussian avatar (e.g. an LHM export): orient, ground, scale, skin, validate."""
+    from song.datasets.avatars import save_avatar
+    from song.datasets.avatars.importer import import_ply_avatar
+
+    asset = import_ply_avatar(ply, avatar_id or ply.name.split(".")[0], height, up, forward)
+    path = save_avatar(asset, out)
+    console.print(f"wrote {path}: {len(asset):,} Gaussians, {asset.height_m:.2f} m")
