@@ -38,6 +38,7 @@ demo: setup
 	$(SONG) viz scene $(SCENES)/procthor_house_6 --out $(FIGURES)/scene.png
 	$(SONG) viz crowd $(RUN) --scene procthor_house_6 --out $(FIGURES)
 	$(SONG) viz episode $(BENCH) --episode procthor_house_6-001 --results $(EVAL)/social.parquet --out $(FIGURES)
+	$(SONG) viz avatar --out $(FIGURES)/avatars.png --count 6
 	@echo "results: $(EVAL)/results.md  figures: $(FIGURES)/"
 
 test: setup

@@ -75,15 +75,18 @@ def bench(
 @viz_app.command("avatar")
 @handle_errors
 def avatar(
-    avatars: Path = typer.Option(..., "--avatars", help="pool folder of *.avatar.npz"),
+    avatars: Path = typer.Option(None, "--avatars", help="pool folder of *.avatar.npz (default: the default pool)"),
     out: Path = typer.Option(Path("avatars.png"), "--out", help="PNG path"),
     count: int = typer.Option(5, "--count", min=1, help="identities to show"),
 ) -> None:
     """Splat preview of a few identities: front and side, rest pose and mid-stride."""
+    from song.config import BindingConfig
     from song.datasets.avatars import list_avatars, load_avatar
+    from song.pipeline.binding.pool import ensure_pool
     from song.viz.avatar import draw_avatars, mid_stride
 
-    assets = [load_avatar(path) for path in list_avatars(avatars)[:count]]
+    paths = list_avatars(avatars) if avatars else ensure_pool(BindingConfig())
+    assets = [load_avatar(path) for path in paths[:count]]
     if not assets:
         raise typer.BadParameter(f"{avatars}: no *.avatar.npz here")
     _report([draw_avatars(assets, out, pose=mid_stride)])
