@@ -564,9 +564,19 @@ def trace_legal(legal: np.ndarray, resolution: float, origin: tuple[float, float
             if len(contours[child]) >= 3:
                 holes.append(world(contours[child]))
             child = hierarchy[0][child][0]
-        poly = shapely.make_valid(Polygon(world(contours[i]), holes))
-        polys.extend(g for g in getattr(poly, "geoms", [poly]) if g.geom_type == "Polygon" and g.area > 0)
+        polys.extend(_polygon_parts(shapely.make_valid(Polygon(world(contours[i]), holes))))
     return polys
+
+
+def _polygon_parts(geometry) -> list:
+    """The non-empty polygons of a geometry, at any nesting depth.
+
+    ``make_valid`` of a contour whose hole touches the outer ring (a self-intersection) returns a
+    GeometryCollection holding a MultiPolygon and a LineString; one level of ``geoms`` is not enough.
+    """
+    if geometry.geom_type == "Polygon":
+        return [geometry] if geometry.area > 0 else []
+    return [part for child in getattr(geometry, "geoms", []) for part in _polygon_parts(child)]
 
 
 def simplify_polygons(polys: list, error: float, min_area: float = 0.0) -> list:

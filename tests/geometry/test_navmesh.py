@@ -148,3 +148,17 @@ def test_build_from_grid_round_trip_and_walls() -> None:
     walls = shapely.union_all([LineString(np.vstack([g, g[:1]])) for g in rings])
     d = shapely.distance(walls, shapely.points(mesh.vertices))
     assert d.min() >= r - 1e-6
+
+
+def test_hole_touching_the_outer_contour_keeps_the_mesh(tmp_path) -> None:
+    """Generated office_0490 (seed 0): a hole's contour touches the outer one, so ``make_valid`` returns a
+    GeometryCollection(MultiPolygon, LineString); the mesh must keep the polygons (it came out empty)."""
+    from song.datasets.scenes import load_scene_package
+    from song.datasets.scenes.generate import generate_scene
+    from song.pipeline.crowd.navmesh import legal_centres, scene_navmesh
+
+    package = load_scene_package(generate_scene("office_0490", "office", 0, tmp_path))
+    mesh = scene_navmesh(package, 0.25, 0.05)
+    legal_area = legal_centres(package, 0.25).sum() * package.occupancy.resolution**2
+    assert len(mesh.triangles) > 0
+    assert 0.9 * legal_area < mesh.area <= 1.02 * legal_area
