@@ -35,15 +35,18 @@ class GridGraph:
     matrix: sparse.csr_matrix
 
 
-def grid_graph(mask: np.ndarray) -> GridGraph:
-    """Build the graph: edges between 8-neighbours that are both True (diagonals need both sides free)."""
+def grid_graph(mask: np.ndarray, diagonal: bool = True) -> GridGraph:
+    """Build the graph: edges between 8-neighbours that are both True (diagonals need both sides free).
+
+    ``diagonal=False`` keeps only the 4 orthogonal neighbours.
+    """
     rows, cols = mask.shape
     index = np.full(mask.shape, -1, dtype=np.int64)
     cells = np.argwhere(mask)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     padded = np.pad(mask, 1)
     src, dst, weight = [], [], []
-    for dr, dc, w in _STEPS:
+    for dr, dc, w in _STEPS if diagonal else _STEPS[:2]:
         ok = mask & padded[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + cols]
         if dr and dc:  # no corner cutting: both orthogonal neighbours must be free
             ok &= padded[1 + dr : 1 + dr + rows, 1 : 1 + cols] & padded[1 : 1 + rows, 1 + dc : 1 + dc + cols]

@@ -9,15 +9,8 @@ from scipy import ndimage
 
 from song.config import GradingConfig
 from song.datasets.scenes import ScenePackage
-from song.geometry.gridpath import (
-    GridGraph,
-    clearance,
-    distances_from,
-    grid_graph,
-    path_cells,
-    polyline_length,
-    shortcut,
-)
+from song.geometry.astar import astar
+from song.geometry.gridpath import clearance, polyline_length, shortcut
 
 MODES = ("co_directional", "counter_directional", "encounter", "random")
 FPS = 30
@@ -25,14 +18,12 @@ FPS = 30
 
 @dataclass
 class RobotMap:
-    """Where the robot can be: free space inflated by its radius, and the shortest-path graph on it."""
+    """Where the robot can be: free space inflated by its radius (A* runs on this grid)."""
 
     package: ScenePackage
     legal: np.ndarray
     clearance: np.ndarray
-    xy: np.ndarray  # (n, 2) world centres of the graph's cells
-
-    graph: GridGraph | None = None
+    xy: np.ndarray  # (n, 2) world centres of the legal cells
     labels: np.ndarray | None = None  # connected components of ``legal`` (cheap reachability test)
 
     @classmethod
@@ -41,9 +32,8 @@ class RobotMap:
         grid = package.occupancy
         room = clearance(grid.free, grid.resolution)
         legal = room >= radius + 0.5 * grid.resolution
-        graph = grid_graph(legal)
         labels, _ = ndimage.label(legal, structure=np.ones((3, 3)))
-        return cls(package, legal, room, grid.to_world(graph.cells), graph, labels)
+        return cls(package, legal, room, grid.to_world(np.argwhere(legal)), labels)
 
     def connected(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Same walkable component (no path search needed to reject the rest)."""
@@ -58,10 +48,7 @@ class RobotMap:
         """
         grid = self.package.occupancy
         a, b = (tuple(int(v) for v in grid.to_cell(p)) for p in (start, goal))
-        if self.graph.index[a] < 0 or self.graph.index[b] < 0:
-            return None
-        dist, pred = distances_from(self.graph, a, with_path=True, limit=max_length_m / grid.resolution + 1.0)
-        cells = path_cells(self.graph, dist, pred, b)
+        _, cells = astar(self.legal, a, b, limit=max_length_m / grid.resolution + 1.0)
         if cells is None:
             return None
         points = grid.to_world(shortcut(self.legal, cells))
