@@ -257,12 +257,13 @@ def _agent_neighbours(positions: np.ndarray, params: OrcaParams) -> tuple[np.nda
 
 
 def _agent_lines(positions, velocities, radii, params: OrcaParams):
-    """Agent half-planes ``(px, py, dx, dy, valid)`` each (K, N) (slot first); unused slots hold the filler."""
+    """Agent half-planes: lines (4, K, N) -- px, py, dx, dy, slot first -- and their mask (K, N)."""
     idx, valid = _agent_neighbours(positions, params)
     idx, valid = np.ascontiguousarray(idx.T), np.ascontiguousarray(valid.T)
-    x, y, u, v = (np.ascontiguousarray(c) for c in (*positions.T, *velocities.T))
-    rx, ry = x[idx] - x, y[idx] - y
-    vx, vy = u - u[idx], v - v[idx]
+    state = np.concatenate([positions.T, velocities.T])  # (4, N): x, y, u, v
+    rel = state[:, idx] - state[:, None, :]  # neighbour minus self, (4, K, N)
+    rx, ry = rel[0], rel[1]
+    vx, vy = -rel[2], -rel[3]  # relative velocity: self minus neighbour
     dist_sq = rx * rx + ry * ry
     r = radii + radii[idx]
     r_sq = r * r
@@ -282,19 +283,18 @@ def _agent_lines(positions, velocities, radii, params: OrcaParams):
         ly = side * ((side * rx * r + ry * leg) / dist_sq)
     proj = vx * lx + vy * ly
     scale = r * inv - w_len
-    px = u + 0.5 * np.where(circle, scale * ux, proj * lx - vx)
-    py = v + 0.5 * np.where(circle, scale * uy, proj * ly - vy)
-    return (*_fill(px, py, np.where(circle, uy, lx), np.where(circle, -ux, ly), valid), valid)
+    px = state[2] + 0.5 * np.where(circle, scale * ux, proj * lx - vx)
+    py = state[3] + 0.5 * np.where(circle, scale * uy, proj * ly - vy)
+    return _fill(np.stack([px, py, np.where(circle, uy, lx), np.where(circle, -ux, ly)]), valid), valid
 
 
-def _fill(px, py, dx, dy, valid):
-    """Replace unused slots by the filler line: direction (1, 0) through (0, -FAR), always satisfied."""
-    return (
-        np.where(valid, px, 0.0),
-        np.where(valid, py, -FAR),
-        np.where(valid, dx, 1.0),
-        np.where(valid, dy, 0.0),
-    )
+FILLER = np.array([0.0, -FAR, 1.0, 0.0])[:, None, None]  # (px, py, dx, dy) of the filler line
+
+
+def _fill(lines, valid):
+    """Lines (4, L, M) with unused slots replaced by the filler line, through (0, -FAR) along (1, 0):
+    the whole max-speed disc satisfies it and it never bounds another line inside the disc."""
+    return np.where(valid, lines, FILLER)
 
 
 def _obstacle_neighbours(positions, radii, max_speeds, obs: ObstacleSet, params: OrcaParams):
@@ -353,7 +353,7 @@ def _tangents(rx, ry, r):
 
 
 def _obstacle_lines(positions, velocities, radii, max_speeds, obs: ObstacleSet, params: OrcaParams):
-    """Obstacle half-planes ``(px, py, dx, dy, emitted)`` each (M, N), or None when no agent sees an edge.
+    """Obstacle half-planes: lines (4, M, N) and their mask (M, N), or None when no agent sees an edge.
 
     The first loop of ``computeNewVelocity``, for all (agent, edge) pairs at once; only the "already
     covered by an earlier line" test runs edge slot by edge slot.
@@ -443,17 +443,19 @@ def _obstacle_lines(positions, velocities, radii, max_speeds, obs: ObstacleSet, 
     emitted = emits.copy()
     for k_ in range(1, emitted.shape[1]):
         emitted[:, k_] &= ~(covers[:, :k_, k_] & emitted[:, :k_]).any(1)
-    return tuple(np.ascontiguousarray(a.T) for a in (*_fill(px, py, dx, dy, emitted), emitted))
+    lines = _fill(np.stack([px, py, dx, dy]), emitted)  # (4, N, M)
+    return np.ascontiguousarray(lines.transpose(0, 2, 1)), np.ascontiguousarray(emitted.T)
 
 
-def _pairs(px, py, dx, dy):
-    """``linearProgram1``'s terms for every pair of lines, each (L_j, L_i, M) from (L, M) lines.
+def _pairs(lines):
+    """``linearProgram1``'s terms for every pair of lines, each (L_j, L_i, M) from lines (4, L, M).
 
     Line j cuts line i at ``p_i + t d_i``; it bounds t from above where det(d_i, d_j) > EPS, from
     below where it is < -EPS. Lines within ``EPS`` of parallel do not cut: ``bad`` marks those that
     exclude line i altogether. The other line j comes first, so reductions over it are fast.
     Returns ``(upper, lower, bad)``.
     """
+    px, py, dx, dy = lines
     den = dx[None] * dy[:, None] - dy[None] * dx[:, None]  # [j, i]: det(d_i, d_j)
     num = dx[:, None] * py[None] - dy[:, None] * px[None]  # det(d_j, p_i - p_j) = det(d_j, p_i) - det(d_j, p_j)
     num -= (dx * py - dy * px)[:, None]
@@ -464,17 +466,18 @@ def _pairs(px, py, dx, dy):
     return upper, lower, (np.abs(den) <= EPS) & (num < 0.0)  # j == i: den == num == 0, never bad
 
 
-def _disc(px, py, dx, dy, radius):
+def _disc(lines, radius):
     """Interval of each line inside the max-speed disc: ``(t_left, t_right, non-empty)``, each (L, M)."""
+    px, py, dx, dy = lines
     dot = px * dx + py * dy
     disc = dot * dot + radius * radius - (px * px + py * py)
     sq = np.sqrt(np.maximum(disc, 0.0))
     return -sq - dot, sq - dot, disc >= 0.0
 
 
-def _violation(px, py, dx, dy, vx, vy):
-    """det(d, p - v): > 0 where velocity v breaks the half-plane (p, d)."""
-    return dx * (py - vy) - dy * (px - vx)
+def _violation(lines, vx, vy):
+    """det(d, p - v) of lines (4, ...): > 0 where velocity v breaks the half-plane (p, d)."""
+    return lines[2] * (lines[1] - vy) - lines[3] * (lines[0] - vx)
 
 
 def _clip_to_disc(ox, oy, radius):
@@ -484,8 +487,9 @@ def _clip_to_disc(ox, oy, radius):
     return np.where(outside, ox / norm * radius, ox), np.where(outside, oy / norm * radius, oy)
 
 
-def _closest(px, py, dx, dy, t_left, t_right, ok, ox, oy):
+def _closest(lines, t_left, t_right, ok, ox, oy):
     """Per agent, the point of the best feasible line interval closest to o; (M,) each."""
+    px, py, dx, dy = lines
     t = np.clip(dx * (ox - px) + dy * (oy - py), t_left, t_right)
     cx, cy = px + t * dx, py + t * dy
     best = np.argmin(np.where(ok, (cx - ox) ** 2 + (cy - oy) ** 2, np.inf), axis=0)
@@ -493,31 +497,31 @@ def _closest(px, py, dx, dy, t_left, t_right, ok, ox, oy):
     return cx[best, cols], cy[best, cols]
 
 
-def _lp2(px, py, dx, dy, radius, ox, oy):
+def _lp2(lines, radius, ox, oy):
     """``linearProgram2`` (closest to o) for all agents, loop-free: ``(vx, vy, fail)`` each (N,).
 
-    Lines are (L, N). The optimum is unique: o clipped to the disc if that breaks no line, else the
-    point closest to o of some line's interval left by the disc and all other lines -- where RVO2's
-    incremental LP ends too. Where that is empty, ``fail`` is the first line whose prefix of lines
-    is infeasible (else L) and the answer the optimum of the prefix before it, as RVO2 returns it.
+    Lines are (4, L, N). The optimum is unique: o clipped to the disc if that breaks no line, else
+    the point closest to o of some line's interval left by the disc and all other lines -- where
+    RVO2's incremental LP ends too. Where that is empty, ``fail`` is the first line whose prefix of
+    lines is infeasible (else L) and the answer the optimum of the prefix before it, as in RVO2.
     """
-    n_lines, n = px.shape
+    n_lines, n = lines.shape[1:]
     v0x, v0y = _clip_to_disc(ox, oy, radius)
     fail = np.full(n, n_lines)
     if n_lines == 0:
         return v0x, v0y, fail
-    con = np.flatnonzero((_violation(px, py, dx, dy, v0x, v0y) > 0.0).any(axis=0))
+    con = np.flatnonzero((_violation(lines, v0x, v0y) > 0.0).any(axis=0))
     if len(con) == 0:
         return v0x, v0y, fail
     # o (clipped) breaks a line: the answer lies on one of the lines
-    px, py, dx, dy, radius, ox, oy = (a[..., con] for a in (px, py, dx, dy, radius, ox, oy))
-    t_left0, t_right0, in_disc = _disc(px, py, dx, dy, radius)
-    upper, lower, bad = _pairs(px, py, dx, dy)
+    lines, radius, ox, oy = lines[..., con], radius[con], ox[con], oy[con]
+    t_left0, t_right0, in_disc = _disc(lines, radius)
+    upper, lower, bad = _pairs(lines)
     t_right = np.minimum(upper.min(axis=0), t_right0)
     t_left = np.maximum(lower.max(axis=0), t_left0)
     ok = in_disc & ~bad.any(axis=0) & (t_left <= t_right)
     vx, vy = v0x.copy(), v0y.copy()
-    vx[con], vy[con] = _closest(px, py, dx, dy, t_left, t_right, ok, ox, oy)
+    vx[con], vy[con] = _closest(lines, t_left, t_right, ok, ox, oy)
     rows = np.flatnonzero(~ok.any(axis=0))
     if len(rows) == 0:
         return vx, vy, fail
@@ -530,33 +534,36 @@ def _lp2(px, py, dx, dy, radius, ox, oy):
     t_right = np.minimum(upper, t_right0[:, rows]).swapaxes(0, 1)  # [i, k, row]
     t_left = np.maximum(lower, t_left0[:, rows]).swapaxes(0, 1)
     ok = in_disc[:, None, rows] & ~bad.swapaxes(0, 1) & (t_left <= t_right) & np.tri(n_lines, dtype=bool).T[:, :, None]
-    px, py, dx, dy, ox, oy = (a[..., rows] for a in (px, py, dx, dy, ox, oy))
+    lines, ox, oy = lines[..., rows], ox[rows], oy[rows]
     rows = con[rows]
-    first_break = np.argmax(_violation(px, py, dx, dy, v0x[rows], v0y[rows]) > 0.0, axis=0)
+    first_break = np.argmax(_violation(lines, v0x[rows], v0y[rows]) > 0.0, axis=0)
     feasible = (np.arange(n_lines)[:, None] < first_break) | ok.any(axis=0)  # [k, row]
     fail[rows] = np.argmin(feasible, axis=0)
     k = np.maximum(fail[rows] - 1, 0)
     cols = np.arange(len(rows))
-    cx, cy = _closest(px, py, dx, dy, t_left[:, k, cols], t_right[:, k, cols], ok[:, k, cols], ox, oy)
+    cx, cy = _closest(lines, t_left[:, k, cols], t_right[:, k, cols], ok[:, k, cols], ox, oy)
     use_v0 = fail[rows] <= first_break  # the prefix before the failing line keeps o (clipped)
     vx[rows] = np.where(use_v0, v0x[rows], cx)
     vy[rows] = np.where(use_v0, v0y[rows], cy)
     return vx, vy, fail
 
 
-def _lp_direction(px, py, dx, dy, radius, ox, oy):
+def _lp_direction(lines, radius, ox, oy):
     """``linearProgram2`` in direction mode (furthest along the unit vector o), loop-free.
 
-    Lines are (L, M). The optimum is o * radius if that breaks no line, else the end along o of some
-    line's interval left by the disc and all other lines. Returns ``(vx, vy, feasible)`` (M,).
+    Lines are (4, L, M). The optimum is o * radius if that breaks no line, else the end along o of
+    some line's interval left by the disc and all other lines. Returns ``(vx, vy, feasible)`` (M,).
     """
     v0x, v0y = ox * radius, oy * radius
-    ok0 = (_violation(px, py, dx, dy, v0x, v0y) <= 0.0).all(axis=0)
-    t_left, t_right, ok = _disc(px, py, dx, dy, radius)
-    upper, lower, bad = _pairs(px, py, dx, dy)
+    if lines.shape[1] == 0:
+        return v0x, v0y, np.ones(len(v0x), dtype=bool)
+    ok0 = (_violation(lines, v0x, v0y) <= 0.0).all(axis=0)
+    t_left, t_right, ok = _disc(lines, radius)
+    upper, lower, bad = _pairs(lines)
     t_right = np.minimum(upper.min(axis=0), t_right)
     t_left = np.maximum(lower.max(axis=0), t_left)
     ok &= ~bad.any(axis=0) & (t_left <= t_right)
+    px, py, dx, dy = lines
     t = np.where(ox * dx + oy * dy > 0.0, t_right, t_left)
     cx, cy = px + t * dx, py + t * dy
     best = np.argmax(np.where(ok, cx * ox + cy * oy, -np.inf), axis=0)
@@ -564,48 +571,48 @@ def _lp_direction(px, py, dx, dy, radius, ox, oy):
     return np.where(ok0, v0x, cx[best, cols]), np.where(ok0, v0y, cy[best, cols]), ok0 | ok.any(axis=0)
 
 
-def _lp3(px, py, dx, dy, projectable, n_obst, begin, radius, vx, vy):
+def _lp3(lines, projectable, n_obst, begin, radius, vx, vy):
     """``linearProgram3`` for agents whose 2-D LP failed at line ``begin`` (r,), all together.
 
-    Lines are (L, r). RVO2 walks the lines from ``begin``; at each line i broken by more than the
+    Lines are (4, L, r). RVO2 walks the lines from ``begin``; at each line i broken by more than the
     best so far, it keeps obstacle lines (slots < n_obst) hard, replaces each agent line j < i by the
     line where breaking j and i costs the same, and takes the velocity furthest into line i. Here
     every agent jumps straight to its next such line, so the loop runs as many times as the longest
     such chain (a few), each time one direction-optimising 2-D LP for all agents still going.
     ``projectable`` (L, r) marks agent slots that hold real lines.
     """
-    n_lines, r = px.shape
+    n_lines, r = lines.shape[1:]
     slot = np.arange(n_lines)[:, None]
-    hard = slot < n_obst
     done = np.full(r, -1)  # last line handled
     distance = np.zeros(r)
     while True:
-        todo = (slot > done) & (slot >= begin) & (_violation(px, py, dx, dy, vx, vy) > distance)
+        todo = (slot > done) & (slot >= begin) & (_violation(lines, vx, vy) > distance)
         rows = np.flatnonzero(todo.any(axis=0))
         if len(rows) == 0:
             return vx, vy
         i = np.argmax(todo[:, rows], axis=0)
-        pix, piy, dix, diy = (a[i, rows] for a in (px, py, dx, dy))
-        pjx, pjy, djx, djy = px[:, rows], py[:, rows], dx[:, rows], dy[:, rows]
+        line_i = lines[:, i, rows]  # (4, rows)
+        pix, piy, dix, diy = line_i
+        width = max(int(i.max()), n_obst)  # later slots would all be fillers
+        others = lines[:, :width, rows]
+        pjx, pjy, djx, djy = others
         det = dix * djy - diy * djx
         par = np.abs(det) <= EPS
-        use = projectable[:, rows] & (slot >= n_obst) & (slot < i) & ~(par & (dix * djx + diy * djy > 0.0))
+        use = projectable[:width, rows] & (slot[:width] < i) & ~(par & (dix * djx + diy * djy > 0.0))
         with np.errstate(divide="ignore", invalid="ignore"):
             s = (djx * (piy - pjy) - djy * (pix - pjx)) / det
             ex, ey = _normalised(djx - dix, djy - diy)
-            qx = np.where(par, 0.5 * (pix + pjx), pix + s * dix)
-            qy = np.where(par, 0.5 * (piy + pjy), piy + s * diy)
-        lines = _fill(
-            np.where(hard, pjx, qx),
-            np.where(hard, pjy, qy),
-            np.where(hard, djx, ex),
-            np.where(hard, djy, ey),
-            hard | use,
-        )
-        nx, ny, ok = _lp_direction(*lines, radius[rows], -diy, dix)
+        qx = np.where(par, 0.5 * (pix + pjx), pix + s * dix)
+        qy = np.where(par, 0.5 * (piy + pjy), piy + s * diy)
+        proj = np.stack([qx, qy, ex, ey])
+        if n_obst:  # obstacle lines stay as they are
+            hard = slot[:width] < n_obst
+            proj = np.where(hard, others, proj)
+            use |= hard
+        nx, ny, ok = _lp_direction(_fill(proj, use), radius[rows], -diy, dix)
         vx[rows] = np.where(ok, nx, vx[rows])
         vy[rows] = np.where(ok, ny, vy[rows])
-        distance[rows] = _violation(pix, piy, dix, diy, vx[rows], vy[rows])
+        distance[rows] = _violation(line_i, vx[rows], vy[rows])
         done[rows] = i
 
 
@@ -639,13 +646,12 @@ def orca_step(
     speeds = np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (len(pos),))
     if not len(vel) == len(pref) == len(pos):
         raise ValueError("orca_step: positions, velocities and pref_velocities must all be (N, 2)")
-    px, py, dx, dy, real, n_obst = _lines(pos, vel, radii, speeds, obstacles, params)
-    vx, vy, fail = _lp2(px, py, dx, dy, speeds, pref[:, 0], pref[:, 1])
-    bad = np.flatnonzero(fail < px.shape[0])
+    lines, real, n_obst = _lines(pos, vel, radii, speeds, obstacles, params)
+    vx, vy, fail = _lp2(lines, speeds, pref[:, 0], pref[:, 1])
+    bad = np.flatnonzero(fail < lines.shape[1])
     if len(bad):
-        projectable = real[:, bad] & (np.arange(px.shape[0]) >= n_obst)[:, None]
-        sub = [a[:, bad] for a in (px, py, dx, dy)]
-        vx[bad], vy[bad] = _lp3(*sub, projectable, n_obst, fail[bad], speeds[bad], vx[bad], vy[bad])
+        projectable = real[:, bad] & (np.arange(lines.shape[1]) >= n_obst)[:, None]
+        vx[bad], vy[bad] = _lp3(lines[..., bad], projectable, n_obst, fail[bad], speeds[bad], vx[bad], vy[bad])
     return np.stack([vx, vy], axis=1)
 
 
@@ -664,17 +670,16 @@ def orca_lines(positions, velocities, radii, max_speeds, obstacles: ObstacleSet 
     vel = np.asarray(velocities, dtype=np.float64).reshape(-1, 2)
     radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(pos),))
     speeds = np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (len(pos),))
-    *lines, n_obst = _lines(pos, vel, radii, speeds, obstacles, params)
-    return (*(a.T for a in lines), n_obst)
+    lines, real, n_obst = _lines(pos, vel, radii, speeds, obstacles, params)
+    return (*lines.transpose(0, 2, 1), real.T, n_obst)
 
 
 def _lines(pos, vel, radii, speeds, obstacles: ObstacleSet | None, params: OrcaParams):
-    """:func:`orca_lines` with slot-first (L, N) arrays, as the LPs use them."""
-    *agent, valid = _agent_lines(pos, vel, radii, params)
+    """:func:`orca_lines` as the LPs use them: lines (4, L, N), mask (L, N), number of obstacle slots."""
+    lines, valid = _agent_lines(pos, vel, radii, params)
     obst = None
     if obstacles is not None and obstacles.n_vertices and len(pos):
         obst = _obstacle_lines(pos, vel, radii, speeds, obstacles, params)
     if obst is None:
-        return (*agent, valid, 0)
-    merged = [np.concatenate(pair, axis=0) for pair in zip(obst, (*agent, valid), strict=True)]
-    return (*merged, obst[0].shape[0])
+        return lines, valid, 0
+    return np.concatenate([obst[0], lines], axis=1), np.concatenate([obst[1], valid]), obst[0].shape[1]

@@ -47,9 +47,9 @@ def test_dense_crowd_uses_the_3d_lp_and_matches_twin(seed: int) -> None:
     """Squeezed agents (2-D LP infeasible) go through linearProgram3, with walls kept hard."""
     pos, vel, pref, radii, speeds = _agents(120, 100 + seed, spread=0.6)
     obstacles = build_obstacles(_room())
-    px, py, dx, dy, real, n_obst = orca._lines(pos, vel, radii, speeds, obstacles, PARAMS)
-    _, _, fail = orca._lp2(px, py, dx, dy, speeds, pref[:, 0], pref[:, 1])
-    assert (fail < len(px)).sum() >= 10 and n_obst > 0
+    lines, _, n_obst = orca._lines(pos, vel, radii, speeds, obstacles, PARAMS)
+    _, _, fail = orca._lp2(lines, speeds, pref[:, 0], pref[:, 1])
+    assert (fail < lines.shape[1]).sum() >= 10 and n_obst > 0
     args = (pos, vel, pref, radii, speeds, obstacles, PARAMS)
     np.testing.assert_allclose(orca_step(*args), ref.orca_step_reference(*args), rtol=0, atol=TWIN_TOL)
 
