@@ -184,6 +184,19 @@ def lbs_rotations(skin: SkinnedGaussians, transforms: Any, block: int | None = N
     return posed[0] if single else posed
 
 
+def accelerator() -> str | None:
+    """``"cuda"`` when torch is installed and sees a GPU, else None (then numpy is the faster CPU path).
+
+    Measured on 2 CPU cores: numpy poses positions ~2× faster than torch-CPU and rotations about as
+    fast, so bulk posing moves to torch only when it can use a GPU.
+    """
+    try:
+        import torch
+    except ImportError:
+        return None
+    return "cuda" if torch.cuda.is_available() else None
+
+
 def lbs(skin: SkinnedGaussians, transforms: Any) -> tuple[Any, Any]:
     """Posed means and rotations: ``(lbs_positions, lbs_rotations)``."""
     return lbs_positions(skin, transforms), lbs_rotations(skin, transforms)

@@ -33,7 +33,7 @@ import numpy as np
 from song.datasets.avatars.asset import AvatarAsset
 from song.errors import FormatError
 from song.geometry.fk import skinning_transforms
-from song.geometry.lbs import SkinnedGaussians, lbs, lbs_positions
+from song.geometry.lbs import SkinnedGaussians, accelerator, lbs, lbs_positions
 from song.geometry.rotations import quat_continuous, quat_normalize, quat_slerp
 from song.util import write_npz_atomic, write_npz_compressed_atomic
 
@@ -157,12 +157,21 @@ def skin_asset(asset: AvatarAsset) -> SkinnedGaussians:
 def write_materialized_cache(path: str | Path, asset: AvatarAsset, motion: MotionCache, chunk: int = 256) -> None:
     """Pose every frame and write the paper's FP16 form (``asset`` already scaled to the motion)."""
     skin = skin_asset(asset)
+    device = accelerator()
+    if device is not None:  # bulk posing on the GPU when there is one (same code path, torch tensors)
+        import torch
+
+        skin = skin.to_torch(device)
     n, g = len(motion), len(asset)
     positions = np.empty((n, g, 3), np.float16)
     rotations = np.empty((n, g, 4), np.float16)
     for start in range(0, n, chunk):
         frames = slice(start, min(start + chunk, n))
-        posed, quats = lbs(skin, motion.transforms(frames))
+        transforms = motion.transforms(frames)
+        if device is not None:
+            posed, quats = (x.cpu().numpy() for x in lbs(skin, torch.as_tensor(transforms, device=device)))
+        else:
+            posed, quats = lbs(skin, transforms)
         positions[frames] = posed - motion.root_pos[frames, None, :]
         rotations[frames] = quats
     cloud = asset.gaussians

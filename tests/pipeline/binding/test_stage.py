@@ -124,3 +124,21 @@ def test_release_rows_reference_the_binding(make_scene, tmp_path, pool) -> None:
             assert asset.meta["sha256"] == cache.meta["avatar_sha256"]
             assert row["cache"]["sha256"] == sha256_file(store.root / row["cache"]["path"])
             assert (row["amass"] is not None) == amass
+
+
+def test_materialized_cache_on_the_torch_path_matches_numpy(make_scene, tmp_path, pool, monkeypatch) -> None:
+    """The bulk posing moves to torch when a GPU is there; run that path on the CPU and compare."""
+    pytest.importorskip("torch")
+    from song.datasets.avatars import cache as cache_module
+
+    ctx = _bound(make_scene, tmp_path, pool)
+    b = json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"][1]
+    motion = load_compact_cache(ctx.scene_dir / b["cache_file"])
+    asset = load_avatar(b["asset_path"]).scaled(motion.meta["scale"])
+    cache_module.write_materialized_cache(tmp_path / "numpy.npz", asset, motion)
+    monkeypatch.setattr(cache_module, "accelerator", lambda: "cpu")
+    cache_module.write_materialized_cache(tmp_path / "torch.npz", asset, motion)
+    a, c = load_materialized_cache(tmp_path / "numpy.npz"), load_materialized_cache(tmp_path / "torch.npz")
+    assert np.abs(a.positions.astype(np.float32) - c.positions.astype(np.float32)).max() <= 2e-3
+    dots = np.abs((a.rotations.astype(np.float32) * c.rotations.astype(np.float32)).sum(-1))
+    assert dots.min() > 0.999
