@@ -21,6 +21,9 @@ from song.runtime.robot import wrap_angle
 from song.runtime.world import StaticWorld
 
 MAX_SPEED = 0.5
+# soft cost on predicted gaps to people below PROXIMITY_M (m); at 1.0 m the robot preferred turning on the
+# spot to passing a standing person at 0.8 m and timed out in doorways (demo: easy SR 89.6 % → 97.9 % at 0.8 m)
+PROXIMITY_M, PROXIMITY_WEIGHT = 0.8, 0.5
 MAX_YAW_RATE = np.deg2rad(45.0)
 
 
@@ -145,7 +148,7 @@ class SocialPolicy:
             weights = np.exp(-k / 1.5)[None, :, None]
             closest = gaps.min(axis=(1, 2))
             people_ok = closest > 0.2 + BODY_RADIUS_M + self.safety
-            cost = cost + 0.5 * (weights * np.clip(1.0 - gaps, 0.0, None)).sum(axis=(1, 2))
+            cost = cost + PROXIMITY_WEIGHT * (weights * np.clip(PROXIMITY_M - gaps, 0.0, None)).sum(axis=(1, 2))
         else:
             closest = np.full(len(traj), np.inf)
             people_ok = np.ones(len(traj), dtype=bool)
