@@ -1,0 +1,431 @@
+"""ORCA compiled with numba: RVO2's per-agent ``computeNeighbors`` + ``computeNewVelocity``, in float64.
+
+The vectorised step (:mod:`song.pipeline.crowd.orca`) pays a fixed cost of ~100 numpy calls per frame,
+which dominates at the crowd sizes of indoor scenes (a handful of pedestrians at 30 FPS). This kernel
+is the per-agent algorithm of ``_reference.py`` (RVO2's ``Agent.cpp``/``KdTree.cpp`` statement by
+statement) compiled to machine code: agent neighbours by sorted insertion capped at ``max_neighbors``,
+obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack, same visiting order),
+obstacle lines with legs, cut-off and foreign legs, agent lines, ``linearProgram1/2/3``. Tests compare
+it with the reference twin and the vectorised step. :func:`orca_step_compiled` has the signature of
+``orca_step``; the crowd uses it when numba is installed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from song.pipeline.crowd.orca import EPS, ObstacleSet, OrcaParams
+
+try:
+    import numba
+except ImportError:  # pragma: no cover
+    numba = None
+HAVE_NUMBA = numba is not None
+
+
+def _jit(fn):
+    return numba.njit(cache=True, nogil=True)(fn) if HAVE_NUMBA else fn
+
+
+@_jit
+def _det(ax, ay, bx, by):
+    return ax * by - ay * bx
+
+
+@_jit
+def _legs(rx, ry, dist_sq, radius):
+    leg = math.sqrt(dist_sq - radius * radius)
+    lx, ly = (rx * leg - ry * radius) / dist_sq, (rx * radius + ry * leg) / dist_sq
+    qx, qy = (rx * leg + ry * radius) / dist_sq, (-rx * radius + ry * leg) / dist_sq
+    return lx, ly, qx, qy
+
+
+@_jit
+def _agent_neighbours(i, pos, neighbor_dist, max_neighbors, out_idx, out_d):
+    range_sq = neighbor_dist * neighbor_dist
+    n = 0
+    for j in range(pos.shape[0]):
+        if j == i:
+            continue
+        dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
+        dist_sq = dx * dx + dy * dy
+        if dist_sq < range_sq:
+            if n < max_neighbors:
+                n += 1
+            k = n - 1
+            while k != 0 and dist_sq < out_d[k - 1]:
+                out_d[k], out_idx[k] = out_d[k - 1], out_idx[k - 1]
+                k -= 1
+            out_d[k], out_idx[k] = dist_sq, j
+            if n == max_neighbors:
+                range_sq = out_d[n - 1]
+    return n
+
+
+@_jit
+def _insert_obstacle(px, py, v, points, nxt, range_sq, found_v, found_d, n):
+    ax, ay = points[v, 0], points[v, 1]
+    bx, by = points[nxt[v], 0], points[nxt[v], 1]
+    ex, ey = bx - ax, by - ay
+    r = ((px - ax) * ex + (py - ay) * ey) / (ex * ex + ey * ey)
+    if r < 0.0:
+        dist_sq = (px - ax) ** 2 + (py - ay) ** 2
+    elif r > 1.0:
+        dist_sq = (px - bx) ** 2 + (py - by) ** 2
+    else:
+        cx, cy = px - (ax + r * ex), py - (ay + r * ey)
+        dist_sq = cx * cx + cy * cy
+    if dist_sq < range_sq:
+        n += 1
+        k = n - 1
+        while k != 0 and dist_sq < found_d[k - 1]:
+            found_d[k], found_v[k] = found_d[k - 1], found_v[k - 1]
+            k -= 1
+        found_d[k], found_v[k] = dist_sq, v
+    return n
+
+
+@_jit
+def _obstacle_neighbours(px, py, range_sq, points, nxt, left, right, root, found_v, found_d, stack):
+    """RVO2's recursive tree query, iteratively: (node, phase) pairs on ``stack`` (V + 1, 2)."""
+    n, top = 0, 0
+    stack[0, 0], stack[0, 1] = root, 0
+    top = 1
+    while top > 0:
+        top -= 1
+        v, phase = stack[top, 0], stack[top, 1]
+        if v < 0:
+            continue
+        ax, ay = points[v, 0], points[v, 1]
+        bx, by = points[nxt[v], 0], points[nxt[v], 1]
+        side = _det(ax - px, ay - py, bx - ax, by - ay)
+        if phase == 0:
+            stack[top, 0], stack[top, 1] = v, 1  # come back after the near side
+            top += 1
+            stack[top, 0], stack[top, 1] = (left[v] if side >= 0.0 else right[v]), 0
+            top += 1
+            continue
+        ex, ey = bx - ax, by - ay
+        if side * side / (ex * ex + ey * ey) < range_sq:
+            if side < 0.0:
+                n = _insert_obstacle(px, py, v, points, nxt, range_sq, found_v, found_d, n)
+            stack[top, 0], stack[top, 1] = (right[v] if side >= 0.0 else left[v]), 0
+            top += 1
+    return n
+
+
+@_jit
+def _add_line(lines, n, px, py, dx, dy):
+    lines[n, 0], lines[n, 1], lines[n, 2], lines[n, 3] = px, py, dx, dy
+    return n + 1
+
+
+@_jit
+def _obstacle_lines(p, v, radius, max_speed, points, nxt, prv, dirs, convex, left_t, right_t, root, th_obst,
+                    lines, found_v, found_d, stack):  # fmt: skip
+    px, py, vx, vy = p[0], p[1], v[0], v[1]
+    inv = 1.0 / th_obst
+    reach = th_obst * max_speed + radius
+    count = _obstacle_neighbours(px, py, reach * reach, points, nxt, left_t, right_t, root, found_v, found_d, stack)
+    n = 0
+    r_sq = radius * radius
+    for idx in range(count):
+        o1 = found_v[idx]
+        o2 = nxt[o1]
+        r1x, r1y = points[o1, 0] - px, points[o1, 1] - py
+        r2x, r2y = points[o2, 0] - px, points[o2, 1] - py
+        covered = False
+        for k in range(n):
+            lpx, lpy, ldx, ldy = lines[k, 0], lines[k, 1], lines[k, 2], lines[k, 3]
+            if (
+                _det(inv * r1x - lpx, inv * r1y - lpy, ldx, ldy) - inv * radius >= -EPS
+                and _det(inv * r2x - lpx, inv * r2y - lpy, ldx, ldy) - inv * radius >= -EPS
+            ):
+                covered = True
+                break
+        if covered:
+            continue
+        d1, d2 = r1x * r1x + r1y * r1y, r2x * r2x + r2y * r2y
+        ovx, ovy = points[o2, 0] - points[o1, 0], points[o2, 1] - points[o1, 1]
+        s = (-r1x * ovx - r1y * ovy) / (ovx * ovx + ovy * ovy)
+        dlx, dly = -r1x - s * ovx, -r1y - s * ovy
+        d_line = dlx * dlx + dly * dly
+        if s < 0.0 and d1 <= r_sq:
+            if convex[o1]:
+                norm = math.sqrt(r1x * r1x + r1y * r1y)
+                n = _add_line(lines, n, 0.0, 0.0, -r1y / norm, r1x / norm)
+            continue
+        if s > 1.0 and d2 <= r_sq:
+            if convex[o2] and _det(r2x, r2y, dirs[o2, 0], dirs[o2, 1]) >= 0.0:
+                norm = math.sqrt(r2x * r2x + r2y * r2y)
+                n = _add_line(lines, n, 0.0, 0.0, -r2y / norm, r2x / norm)
+            continue
+        if 0.0 <= s <= 1.0 and d_line <= r_sq:
+            n = _add_line(lines, n, 0.0, 0.0, -dirs[o1, 0], -dirs[o1, 1])
+            continue
+        if s < 0.0 and d_line <= r_sq:
+            if not convex[o1]:
+                continue
+            o2 = o1
+            lx, ly, rx, ry = _legs(r1x, r1y, d1, radius)
+        elif s > 1.0 and d_line <= r_sq:
+            if not convex[o2]:
+                continue
+            o1 = o2
+            lx, ly, rx, ry = _legs(r2x, r2y, d2, radius)
+        else:
+            if convex[o1]:
+                lx, ly, _, _ = _legs(r1x, r1y, d1, radius)
+            else:
+                lx, ly = -dirs[o1, 0], -dirs[o1, 1]
+            if convex[o2]:
+                _, _, rx, ry = _legs(r2x, r2y, d2, radius)
+            else:
+                rx, ry = dirs[o1, 0], dirs[o1, 1]
+        ln = prv[o1]
+        foreign_left = foreign_right = False
+        if convex[o1] and _det(lx, ly, -dirs[ln, 0], -dirs[ln, 1]) >= 0.0:
+            lx, ly, foreign_left = -dirs[ln, 0], -dirs[ln, 1], True
+        if convex[o2] and _det(rx, ry, dirs[o2, 0], dirs[o2, 1]) <= 0.0:
+            rx, ry, foreign_right = dirs[o2, 0], dirs[o2, 1], True
+        lcx, lcy = inv * (points[o1, 0] - px), inv * (points[o1, 1] - py)
+        rcx, rcy = inv * (points[o2, 0] - px), inv * (points[o2, 1] - py)
+        cvx, cvy = rcx - lcx, rcy - lcy
+        t = 0.5 if o1 == o2 else ((vx - lcx) * cvx + (vy - lcy) * cvy) / (cvx * cvx + cvy * cvy)
+        t_left = (vx - lcx) * lx + (vy - lcy) * ly
+        t_right = (vx - rcx) * rx + (vy - rcy) * ry
+        if (t < 0.0 and t_left < 0.0) or (o1 == o2 and t_left < 0.0 and t_right < 0.0):
+            ux, uy = vx - lcx, vy - lcy
+            norm = math.sqrt(ux * ux + uy * uy)
+            ux, uy = ux / norm, uy / norm
+            n = _add_line(lines, n, lcx + radius * inv * ux, lcy + radius * inv * uy, uy, -ux)
+            continue
+        if t > 1.0 and t_right < 0.0:
+            ux, uy = vx - rcx, vy - rcy
+            norm = math.sqrt(ux * ux + uy * uy)
+            ux, uy = ux / norm, uy / norm
+            n = _add_line(lines, n, rcx + radius * inv * ux, rcy + radius * inv * uy, uy, -ux)
+            continue
+        d_cut = math.inf
+        if not (t < 0.0 or t > 1.0 or o1 == o2):
+            d_cut = (vx - (lcx + t * cvx)) ** 2 + (vy - (lcy + t * cvy)) ** 2
+        d_left = math.inf if t_left < 0.0 else (vx - (lcx + t_left * lx)) ** 2 + (vy - (lcy + t_left * ly)) ** 2
+        d_right = math.inf if t_right < 0.0 else (vx - (rcx + t_right * rx)) ** 2 + (vy - (rcy + t_right * ry)) ** 2
+        if d_cut <= d_left and d_cut <= d_right:
+            dx, dy = -dirs[o1, 0], -dirs[o1, 1]
+            n = _add_line(lines, n, lcx + radius * inv * -dy, lcy + radius * inv * dx, dx, dy)
+            continue
+        if d_left <= d_right:
+            if not foreign_left:
+                n = _add_line(lines, n, lcx + radius * inv * -ly, lcy + radius * inv * lx, lx, ly)
+            continue
+        if not foreign_right:
+            dx, dy = -rx, -ry
+            n = _add_line(lines, n, rcx + radius * inv * -dy, rcy + radius * inv * dx, dx, dy)
+    return n
+
+
+@_jit
+def _agent_line(lines, n, px, py, vx, vy, r, qx, qy, wx, wy, r_other, time_horizon, time_step):
+    rpx, rpy = qx - px, qy - py
+    rvx, rvy = vx - wx, vy - wy
+    dist_sq = rpx * rpx + rpy * rpy
+    comb = r + r_other
+    comb_sq = comb * comb
+    if dist_sq > comb_sq:
+        inv = 1.0 / time_horizon
+        w_x, w_y = rvx - inv * rpx, rvy - inv * rpy
+        w_sq = w_x * w_x + w_y * w_y
+        dot = w_x * rpx + w_y * rpy
+        if dot < 0.0 and dot * dot > comb_sq * w_sq:
+            w_len = math.sqrt(w_sq)
+            ux, uy = w_x / w_len, w_y / w_len
+            dx, dy = uy, -ux
+            k = comb * inv - w_len
+            u_x, u_y = k * ux, k * uy
+        else:
+            lx, ly, qx2, qy2 = _legs(rpx, rpy, dist_sq, comb)
+            if _det(rpx, rpy, w_x, w_y) > 0.0:
+                dx, dy = lx, ly
+            else:
+                dx, dy = -qx2, -qy2
+            proj = rvx * dx + rvy * dy
+            u_x, u_y = proj * dx - rvx, proj * dy - rvy
+    else:
+        inv_dt = 1.0 / time_step
+        w_x, w_y = rvx - inv_dt * rpx, rvy - inv_dt * rpy
+        w_len = math.sqrt(w_x * w_x + w_y * w_y)
+        ux, uy = w_x / w_len, w_y / w_len
+        dx, dy = uy, -ux
+        k = comb * inv_dt - w_len
+        u_x, u_y = k * ux, k * uy
+    return _add_line(lines, n, vx + 0.5 * u_x, vy + 0.5 * u_y, dx, dy)
+
+
+@_jit
+def _lp1(lines, no, radius, ox, oy, direction_opt):
+    px, py, dx, dy = lines[no, 0], lines[no, 1], lines[no, 2], lines[no, 3]
+    dot = px * dx + py * dy
+    disc = dot * dot + radius * radius - (px * px + py * py)
+    if disc < 0.0:
+        return False, 0.0, 0.0
+    sq = math.sqrt(disc)
+    t_left, t_right = -dot - sq, -dot + sq
+    for i in range(no):
+        pix, piy, dix, diy = lines[i, 0], lines[i, 1], lines[i, 2], lines[i, 3]
+        denom = _det(dx, dy, dix, diy)
+        numer = _det(dix, diy, px - pix, py - piy)
+        if abs(denom) <= EPS:
+            if numer < 0.0:
+                return False, 0.0, 0.0
+            continue
+        t = numer / denom
+        if denom >= 0.0:
+            t_right = min(t_right, t)
+        else:
+            t_left = max(t_left, t)
+        if t_left > t_right:
+            return False, 0.0, 0.0
+    if direction_opt:
+        t = t_right if ox * dx + oy * dy > 0.0 else t_left
+        return True, px + t * dx, py + t * dy
+    t = dx * (ox - px) + dy * (oy - py)
+    t = min(max(t, t_left), t_right)
+    return True, px + t * dx, py + t * dy
+
+
+@_jit
+def _lp2(lines, n, radius, ox, oy, direction_opt):
+    if direction_opt:
+        rx, ry = radius * ox, radius * oy
+    elif ox * ox + oy * oy > radius * radius:
+        norm = math.sqrt(ox * ox + oy * oy)
+        rx, ry = ox / norm * radius, oy / norm * radius
+    else:
+        rx, ry = ox, oy
+    for i in range(n):
+        if _det(lines[i, 2], lines[i, 3], lines[i, 0] - rx, lines[i, 1] - ry) > 0.0:
+            ok, nx, ny = _lp1(lines, i, radius, ox, oy, direction_opt)
+            if not ok:
+                return i, rx, ry
+            rx, ry = nx, ny
+    return n, rx, ry
+
+
+@_jit
+def _lp3(lines, n, n_obst, begin, radius, rx, ry, proj):
+    distance = 0.0
+    for i in range(begin, n):
+        pix, piy, dix, diy = lines[i, 0], lines[i, 1], lines[i, 2], lines[i, 3]
+        if _det(dix, diy, pix - rx, piy - ry) > distance:
+            m = 0
+            for j in range(n_obst):
+                m = _add_line(proj, m, lines[j, 0], lines[j, 1], lines[j, 2], lines[j, 3])
+            for j in range(n_obst, i):
+                pjx, pjy, djx, djy = lines[j, 0], lines[j, 1], lines[j, 2], lines[j, 3]
+                det = _det(dix, diy, djx, djy)
+                if abs(det) <= EPS:
+                    if dix * djx + diy * djy > 0.0:
+                        continue
+                    qx, qy = 0.5 * (pix + pjx), 0.5 * (piy + pjy)
+                else:
+                    k = _det(djx, djy, pix - pjx, piy - pjy) / det
+                    qx, qy = pix + k * dix, piy + k * diy
+                ex, ey = djx - dix, djy - diy
+                norm = math.sqrt(ex * ex + ey * ey)
+                m = _add_line(proj, m, qx, qy, ex / norm, ey / norm)
+            fail, nx, ny = _lp2(proj, m, radius, -diy, dix, True)
+            if fail == m:
+                rx, ry = nx, ny
+            distance = _det(dix, diy, pix - rx, piy - ry)
+    return rx, ry
+
+
+@_jit
+def _step(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+          neighbor_dist, max_neighbors, time_horizon, th_obst, time_step):  # fmt: skip
+    n_agents, n_vertices = pos.shape[0], points.shape[0]
+    out = np.zeros((n_agents, 2))
+    size = n_vertices + max_neighbors + 1
+    lines = np.empty((size, 4))
+    proj = np.empty((size, 4))
+    found_v = np.empty(max(n_vertices, 1), dtype=np.int64)
+    found_d = np.empty(max(n_vertices, 1))
+    stack = np.empty((2 * n_vertices + 2, 2), dtype=np.int64)
+    nb_idx = np.empty(max_neighbors, dtype=np.int64)
+    nb_d = np.empty(max_neighbors)
+    for i in range(n_agents):
+        n = 0
+        if n_vertices > 0:
+            n = _obstacle_lines(pos[i], vel[i], radii[i], speeds[i], points, nxt, prv, dirs, convex, left_t,
+                                right_t, root, th_obst, lines, found_v, found_d, stack)  # fmt: skip
+        n_obst = n
+        count = _agent_neighbours(i, pos, neighbor_dist, max_neighbors, nb_idx, nb_d)
+        for k in range(count):
+            j = nb_idx[k]
+            n = _agent_line(lines, n, pos[i, 0], pos[i, 1], vel[i, 0], vel[i, 1], radii[i], pos[j, 0], pos[j, 1],
+                            vel[j, 0], vel[j, 1], radii[j], time_horizon, time_step)  # fmt: skip
+        fail, rx, ry = _lp2(lines, n, speeds[i], pref[i, 0], pref[i, 1], False)
+        if fail < n:
+            rx, ry = _lp3(lines, n, n_obst, fail, speeds[i], rx, ry, proj)
+        out[i, 0], out[i, 1] = rx, ry
+    return out
+
+
+_EMPTY = (
+    np.zeros((0, 2)),
+    np.zeros(0, np.int64),
+    np.zeros(0, np.int64),
+    np.zeros((0, 2)),
+    np.zeros(0, np.bool_),
+    np.zeros(0, np.int64),
+    np.zeros(0, np.int64),
+    -1,
+)
+
+
+def orca_step_compiled(
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    pref_velocities: np.ndarray,
+    radii: np.ndarray,
+    max_speeds: np.ndarray,
+    obstacles: ObstacleSet | None,
+    params: OrcaParams,
+) -> np.ndarray:
+    """Same contract as :func:`song.pipeline.crowd.orca.orca_step` (new (N, 2) velocities)."""
+    pos = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
+    n = len(pos)
+    vel = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 2)
+    pref = np.ascontiguousarray(pref_velocities, dtype=np.float64).reshape(-1, 2)
+    radii = np.ascontiguousarray(np.broadcast_to(np.asarray(radii, dtype=np.float64), (n,)))
+    speeds = np.ascontiguousarray(np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (n,)))
+    if obstacles is None or obstacles.n_vertices == 0:
+        tree = _EMPTY
+    else:
+        o = obstacles
+        tree = (
+            np.ascontiguousarray(o.points, dtype=np.float64),
+            np.ascontiguousarray(o.next, dtype=np.int64),
+            np.ascontiguousarray(o.prev, dtype=np.int64),
+            np.ascontiguousarray(o.directions, dtype=np.float64),
+            np.ascontiguousarray(o.convex, dtype=np.bool_),
+            np.ascontiguousarray(o.node_left, dtype=np.int64),
+            np.ascontiguousarray(o.node_right, dtype=np.int64),
+            int(o.root),
+        )
+    return _step(
+        pos,
+        vel,
+        pref,
+        radii,
+        speeds,
+        *tree,
+        float(params.neighbor_dist),
+        int(params.max_neighbors),
+        float(params.time_horizon),
+        float(params.time_horizon_obst),
+        float(params.time_step),
+    )
