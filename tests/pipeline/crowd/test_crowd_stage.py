@@ -11,12 +11,12 @@ import pytest
 from song.config import SongConfig
 from song.datasets.scenes import load_scene_package
 from song.pipeline.chain import iter_run
-from song.pipeline.crowd import load_crowd
+from song.pipeline.crowd import load_crowd, load_navmesh
 from song.pipeline.intents import load_intents
 from song.pipeline.intents.navigation import walkable
 from tests.conftest import SAMPLES
 
-SCENES = ["procthor_house_1", "procthor_house_19", "procthor_house_6"]
+SCENES = sorted(path.name for path in SAMPLES.iterdir() if (path / "semantic_map.json").exists())
 R = SongConfig().crowd.agent_radius_m
 
 
@@ -30,6 +30,7 @@ def test_crowd_invariants(sample_run: Path, scene: str) -> None:
     assert d.min() >= 2 * R - 0.01
     walk = walkable(load_scene_package(SAMPLES / scene), R)
     assert walk.on_main(crowd.xy.reshape(-1, 2)).all()
+    assert load_navmesh(scene_dir).contains(crowd.xy.reshape(-1, 2), tol=1e-6).all()  # on the navmesh
     intents = {i.id: i for i in load_intents(scene_dir).intents}
     steps = np.linalg.norm(np.diff(crowd.xy, axis=1), axis=-1) * 30
     max_speed = np.array([intents[int(i)].speed for i in crowd.ids])
@@ -44,7 +45,7 @@ def test_most_intents_arrive(sample_run: Path) -> None:
         v for s in SCENES for v in json.loads((sample_run / "scenes" / s / "crowd_status.json").read_text()).values()
     ]
     arrived = sum(v["status"] == "arrived" for v in statuses)
-    assert arrived / len(statuses) >= 0.75, statuses
+    assert arrived / len(statuses) >= 0.95, statuses
     assert all(v["reason"] for v in statuses if v["status"] != "arrived")
 
 
