@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from song.geometry._lbs_kernel import rotations_kernel
 from song.geometry.rotations import _stack, _xp
 from song.geometry.skeleton import N_JOINTS
 
@@ -40,6 +41,7 @@ class SkinnedGaussians:
         weights_t: (J, G) the weights transposed, contiguous (single-frame posing).
         means_t: (3, G) canonical means, planar (single-frame posing).
         quats_t: (4, G) canonical rotations, planar (rotation posing).
+        top_indices, top_weights: (G, k) the sparse weights (the compiled rotation kernel).
     """
 
     weights: Any
@@ -48,6 +50,8 @@ class SkinnedGaussians:
     weights_t: Any = None
     means_t: Any = None
     quats_t: Any = None
+    top_indices: Any = None
+    top_weights: Any = None
 
     @classmethod
     def build(
@@ -61,13 +65,16 @@ class SkinnedGaussians:
         basis = (dense[:, :, None] * homogeneous[:, None, :]).reshape(g, n_joints * 4)
         means_t = np.ascontiguousarray(np.asarray(means, np.float32).T)
         quats = np.asarray(quats, np.float32)
-        return cls(dense, basis, quats, np.ascontiguousarray(dense.T), means_t, np.ascontiguousarray(quats.T))
+        top = (np.ascontiguousarray(indices, np.int64), np.ascontiguousarray(weights, np.float64))
+        return cls(dense, basis, quats, np.ascontiguousarray(dense.T), means_t, np.ascontiguousarray(quats.T), *top)
 
     def to_torch(self, device: Any = "cpu") -> SkinnedGaussians:
         """The same Gaussians as torch tensors on ``device``."""
         import torch
 
-        return SkinnedGaussians(*(torch.as_tensor(np.asarray(a), device=device) for a in vars(self).values()))
+        return SkinnedGaussians(
+            *(None if a is None else torch.as_tensor(np.asarray(a), device=device) for a in vars(self).values())
+        )
 
     def __len__(self) -> int:
         return int(self.basis.shape[0])
@@ -165,13 +172,18 @@ def _rotations_block(xp: Any, skin: SkinnedGaussians, rotations: Any, n_frames: 
 def lbs_rotations(skin: SkinnedGaussians, transforms: Any, block: int | None = None) -> Any:
     """Posed Gaussian rotations (F, G, 4) or (G, 4), wxyz: Shepperd quaternion of the blend ⊗ canonical.
 
-    The elementwise extraction runs over blocks of about ``block`` Gaussian-frames (default 4096 for
+    With numpy inputs and numba installed a compiled loop computes the same definition (3–5× faster);
+    otherwise the elementwise extraction runs over blocks of about ``block`` Gaussian-frames (default 4096 for
     numpy, 65536 for torch, measured) so its ~70 array passes stay in cache (numpy: 3× faster than
     whole-array passes on 2 cores).
     """
     xp = _xp(skin.weights)
     frames, single = _frames_first(transforms)
     n_frames, n_joints = frames.shape[0], frames.shape[1]
+    if xp is np and rotations_kernel is not None and skin.top_indices is not None and block is None:
+        rotations = np.ascontiguousarray(frames[..., :3], dtype=np.float64)
+        posed = rotations_kernel(skin.top_indices, skin.top_weights, skin.quats, rotations)
+        return posed[0] if single else posed
     if block is None:
         block = 1 << 12 if xp is np else 1 << 16
     step = max(1, block // max(len(skin), 1))

@@ -78,3 +78,19 @@ def test_shepperd_matches_rotation_quaternions() -> None:
     m = quat_to_matrix(q)
     np.testing.assert_allclose(_aligned(shepperd_quat(m), q), q, atol=1e-12)
     np.testing.assert_allclose(_aligned(shepperd_quat(m), matrix_to_quat(m)), matrix_to_quat(m), atol=1e-12)
+
+
+def test_compiled_rotations_match_the_numpy_path() -> None:
+    """The numba loop and the blocked numpy extraction compute the same definition."""
+    from song.geometry import _lbs_kernel
+    from song.geometry.lbs import lbs_rotations
+
+    if _lbs_kernel.rotations_kernel is None:
+        pytest.skip("numba not installed")
+    means, quats, indices, weights, transforms = _random_case(11, n=500, frames=4)
+    skin = SkinnedGaussians.build(means, quats, indices, weights)
+    compiled = lbs_rotations(skin, transforms)
+    blocked = lbs_rotations(skin, transforms, block=1 << 12)
+    np.testing.assert_allclose(_aligned(compiled, blocked), blocked, atol=1e-5)
+    single = lbs_rotations(skin, transforms[2])
+    np.testing.assert_allclose(_aligned(single, compiled[2]), compiled[2], atol=1e-6)
