@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import typer
@@ -23,10 +22,6 @@ def bind(
     workers: int = typer.Option(0, "--workers", "-j", min=0, help="worker processes (0 = all cores)"),
 ) -> None:
     """Bind each pedestrian's motion to an avatar identity; writes RUN/scenes/<id>/binding/."""
-    plugins = [name for name in os.environ.get("SONG_STAGE_PLUGINS", "").split(",") if name.strip()]
-    missing = [m for m in ("song.pipeline.motion", "song.pipeline.binding") if m not in plugins]
-    if missing:
-        os.environ["SONG_STAGE_PLUGINS"] = ",".join([*plugins, *missing])
     scenes_dir, config = read_run(run)
     update = {"materialize": materialize or config.binding.materialize}
     if avatars is not None:

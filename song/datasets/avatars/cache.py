@@ -58,6 +58,13 @@ def _read(path: Path, expected_format: str) -> tuple[dict[str, np.ndarray], dict
     return arrays, meta
 
 
+def frame_blend(t: float, fps: float, frame0: int, n_frames: int) -> tuple[int, int, float]:
+    """Frames ``i``, ``j = i + 1`` and blend ``a`` in [0, 1) around time ``t`` (clamped to the cached span)."""
+    x = float(np.clip(t * fps - frame0, 0.0, n_frames - 1))
+    i = min(int(np.floor(x)), n_frames - 1)
+    return i, min(i + 1, n_frames - 1), x - i
+
+
 def encode_rotations(local_quats: np.ndarray) -> np.ndarray:
     """(F, 24, 4) unit quaternions → (24, 4, F) int16 quantised, sign-continuous, delta-coded in time."""
     q = quat_continuous(np.asarray(local_quats, np.float64), axis=0)
@@ -94,12 +101,6 @@ class MotionCache:
     def __len__(self) -> int:
         return len(self.root_pos)
 
-    def frame_position(self, t: float) -> tuple[int, float]:
-        """Frame index ``i`` and blend ``a`` in [0, 1) for time ``t`` (clamped to the cached span)."""
-        x = float(np.clip(t * self.fps - self.frame0, 0.0, len(self) - 1))
-        i = min(int(np.floor(x)), len(self) - 1)
-        return i, x - i
-
     def transforms(self, frames: np.ndarray | slice | None = None) -> np.ndarray:
         """(F, 24, 3, 4) float32 skinning transforms of the cached frames (all by default)."""
         index = slice(None) if frames is None else frames
@@ -107,8 +108,7 @@ class MotionCache:
 
     def transforms_at(self, t: float) -> np.ndarray:
         """(24, 3, 4) float32 transforms at time ``t``: joint rotations slerped, root lerped between frames."""
-        i, a = self.frame_position(t)
-        j = min(i + 1, len(self) - 1)
+        i, j, a = frame_blend(t, self.fps, self.frame0, len(self))
         quats = quat_slerp(self.local_quats[i], self.local_quats[j], a)
         root = (1 - a) * self.root_pos[i].astype(np.float64) + a * self.root_pos[j]
         return skinning_transforms(self.rest_joints.astype(np.float64), quats, root).astype(np.float32)
@@ -201,9 +201,8 @@ class MaterializedCache:
 
     def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """World means (G, 3) float32 and unit rotations (G, 4) at ``t`` (linear between frames)."""
-        x = float(np.clip(t * self.fps - self.frame0, 0.0, len(self.root_pos) - 1))
-        i = min(int(np.floor(x)), len(self.root_pos) - 1)
-        j, a = min(i + 1, len(self.root_pos) - 1), np.float32(x - i)
+        i, j, a = frame_blend(t, self.fps, self.frame0, len(self.root_pos))
+        a = np.float32(a)
         means = (1 - a) * (self.positions[i] + self.root_pos[i]) + a * (self.positions[j] + self.root_pos[j])
         quats = self.rotations[i].astype(np.float32)
         other = self.rotations[j].astype(np.float32)
