@@ -43,6 +43,19 @@ def _legs(rx, ry, dist_sq, radius):
 
 
 @_jit
+def _insert_sorted(keys, values, n, capacity, key, value):
+    """RVO2's insertion into a list sorted by key, capped at ``capacity`` (the last entry drops); returns n."""
+    if n < capacity:
+        n += 1
+    k = n - 1
+    while k != 0 and key < keys[k - 1]:
+        keys[k], values[k] = keys[k - 1], values[k - 1]
+        k -= 1
+    keys[k], values[k] = key, value
+    return n
+
+
+@_jit
 def _agent_neighbours(i, pos, neighbor_dist, max_neighbors, out_idx, out_d):
     range_sq = neighbor_dist * neighbor_dist
     n = 0
@@ -52,13 +65,7 @@ def _agent_neighbours(i, pos, neighbor_dist, max_neighbors, out_idx, out_d):
         dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
         dist_sq = dx * dx + dy * dy
         if dist_sq < range_sq:
-            if n < max_neighbors:
-                n += 1
-            k = n - 1
-            while k != 0 and dist_sq < out_d[k - 1]:
-                out_d[k], out_idx[k] = out_d[k - 1], out_idx[k - 1]
-                k -= 1
-            out_d[k], out_idx[k] = dist_sq, j
+            n = _insert_sorted(out_d, out_idx, n, max_neighbors, dist_sq, j)
             if n == max_neighbors:
                 range_sq = out_d[n - 1]
     return n
@@ -78,12 +85,7 @@ def _insert_obstacle(px, py, v, points, nxt, range_sq, found_v, found_d, n):
         cx, cy = px - (ax + r * ex), py - (ay + r * ey)
         dist_sq = cx * cx + cy * cy
     if dist_sq < range_sq:
-        n += 1
-        k = n - 1
-        while k != 0 and dist_sq < found_d[k - 1]:
-            found_d[k], found_v[k] = found_d[k - 1], found_v[k - 1]
-            k -= 1
-        found_d[k], found_v[k] = dist_sq, v
+        n = _insert_sorted(found_d, found_v, n, len(found_d), dist_sq, v)
     return n
 
 
