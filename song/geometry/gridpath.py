@@ -1,8 +1,10 @@
-"""Shortest paths on occupancy grids (8-connected, Euclidean step costs) and line-of-sight smoothing.
+"""Geodesic distance fields on occupancy grids (8-connected, Euclidean step costs) and line-of-sight
+smoothing of grid paths.
 
-The search runs in scipy's compiled Dijkstra (``scipy.sparse.csgraph``) over a graph built once per
-grid with vectorised numpy, instead of a pure-Python heap: one call from a start gives the geodesic
-distance to every cell (many goals per start are free), and the predecessor array gives the path.
+Distances run in scipy's compiled Dijkstra (``scipy.sparse.csgraph``) over a graph built once per grid
+with vectorised numpy: one call from a start gives the geodesic distance to every cell (many goals per
+start are free; the intents stage uses this). Single start-goal paths come from
+:mod:`song.geometry.astar`.
 """
 
 from __future__ import annotations
@@ -82,19 +84,6 @@ def distances_from_many(graph: GridGraph, starts: np.ndarray) -> np.ndarray:
     if (nodes < 0).any():
         raise ValueError("a start cell is not on the graph")
     return np.atleast_2d(csgraph.dijkstra(graph.matrix, directed=True, indices=nodes))
-
-
-def path_cells(
-    graph: GridGraph, dist: np.ndarray, predecessors: np.ndarray, goal: tuple[int, int]
-) -> np.ndarray | None:
-    """(K, 2) (row, col) cells from the Dijkstra start to ``goal``, or None when unreachable."""
-    node = int(graph.index[goal])
-    if node < 0 or not np.isfinite(dist[node]):
-        return None
-    chain = [node]
-    while predecessors[chain[-1]] >= 0:
-        chain.append(int(predecessors[chain[-1]]))
-    return graph.cells[np.array(chain[::-1])]
 
 
 def line_of_sight(mask: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
