@@ -15,22 +15,11 @@ from song.datasets.scenes import load_scene_package
 from song.errors import FormatError, StageError
 from song.geometry.fk import forward_kinematics
 from song.pipeline.chain import StageContext, load_stages
+from song.pipeline.crowd.stage import SCHEMA  # the crowd.parquet contract
 from song.pipeline.motion import load_motion, read_trajectories, run_motion
 from song.pipeline.motion.amass import from_amass, read_amass
 from song.pipeline.motion.generators import make_generator
 from song.pipeline.motion.synthetic import synthetic_trajectories
-
-SCHEMA = pa.schema(
-    [
-        ("ped_id", pa.int32()),
-        ("frame", pa.int32()),
-        ("t", pa.float64()),
-        ("x", pa.float64()),
-        ("y", pa.float64()),
-        ("yaw", pa.float64()),
-        ("speed", pa.float64()),
-    ]
-)
 
 
 def write_crowd(scene_dir: Path, names=("straight_1.0", "turn_on_spot", "stop_and_go")) -> dict[int, object]:
