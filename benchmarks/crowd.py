@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import emit  # noqa: E402
 
-from song.geometry.gridpath import clearance  # noqa: E402
+from song.geometry.freespace import erode  # noqa: E402
 from song.geometry.navmesh import build_navmesh  # noqa: E402
 
 SIZE_M, RADIUS_M = 20.0, 0.25
@@ -58,7 +58,7 @@ def occupancy(boxes: list[np.ndarray], cell: float) -> np.ndarray:
 def ours(boxes: list[np.ndarray], cell: float) -> tuple[float, float]:
     start = time.perf_counter()
     free = occupancy(boxes, cell)
-    legal = clearance(free, cell) >= RADIUS_M + 0.5 * cell
+    legal = erode(free, cell, RADIUS_M)
     mesh = build_navmesh(legal, cell, (0.0, 0.0), RADIUS_M, cell)
     return time.perf_counter() - start, mesh.area
 

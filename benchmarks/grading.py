@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import emit  # noqa: E402
 
-from song.geometry.astar import HAVE_NUMBA, astar  # noqa: E402
+from song.geometry.astar import astar  # noqa: E402
 
 
 def _best_of(fn, repeats: int) -> float:
@@ -43,7 +43,7 @@ def astar_figures(n: int, repeats: int) -> dict:
     weights = np.where(free, 1.0, np.inf).astype(np.float32)
     start, goal = (0, 0), (n - 1, n - 1)
     astar(free, start, goal)  # compile (or load the cached kernel) outside the timing
-    out = {"grid": n, "numba": HAVE_NUMBA}
+    out = {"grid": n}
     ours_len, _ = astar(free, start, goal, diagonal=False)
     theirs_path = pyastar2d.astar_path(weights, start, goal, allow_diagonal=False)
     ours = _best_of(lambda: astar(free, start, goal, diagonal=False), repeats)

@@ -1,4 +1,4 @@
-"""ORCA throughput: agent-steps per second, ours (numba kernel and vectorised numpy) vs RVO2 (pyrvo), circle.
+"""ORCA throughput: agent-steps per second, ours (the numba kernel) vs RVO2 (pyrvo), circle.
 
 N agents on a circle walk to their antipodes (1–5 cm seeded start jitter) through the crowded centre;
 both simulators run the same steps with the same parameters and the same preferred-velocity rule,
@@ -21,7 +21,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import emit  # noqa: E402
 
 from song.pipeline.crowd.orca import OrcaParams, orca_step  # noqa: E402
-from song.pipeline.crowd.orca_kernel import orca_step_compiled  # noqa: E402
 
 PARAMS = OrcaParams(time_step=1 / 30, neighbor_dist=5.0, max_neighbors=10, time_horizon=5.0, time_horizon_obst=2.0)
 RADIUS, SPEED = 0.25, 1.0
@@ -99,13 +98,11 @@ def main() -> None:
     for n in args.sizes:
         radius = max(4.0, n * 1.2 / (2 * np.pi))
         steps = args.steps or (150 if args.quick else int(2.6 * radius / SPEED / PARAMS.time_step))
-        ours(4, 2, orca_step_compiled)  # compile (or load the cached kernel) outside the timing
-        a, v, b = ours(n, steps, orca_step_compiled), ours(n, steps), rvo2(n, steps)
+        ours(4, 2)  # compile (or load the cached kernel) outside the timing
+        a, b = ours(n, steps), rvo2(n, steps)
         rows[str(n)] = {
             "steps": steps,
             "ours_agent_steps_s": round(a["agent_steps_s"]),
-            "ours_vectorised_agent_steps_s": round(v["agent_steps_s"]),
-            "ratio_vectorised": round(v["agent_steps_s"] / b["agent_steps_s"], 3),
             "rvo2_agent_steps_s": round(b["agent_steps_s"]),
             "rvo2_do_step_only_agent_steps_s": round(b["do_step_only_agent_steps_s"]),
             "ratio": round(a["agent_steps_s"] / b["agent_steps_s"], 3),

@@ -10,6 +10,7 @@ runtime poses release avatars: only those within reach of the robot are posed at
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -22,6 +23,7 @@ from _common import emit  # noqa: E402
 
 from song.config import MotionConfig, RobotConfig  # noqa: E402
 from song.datasets.avatars.cache import MotionCache, PosedAvatar  # noqa: E402
+from song.datasets.bench.types import RuntimeParams  # noqa: E402
 from song.pipeline.motion import synthesize_motions  # noqa: E402
 from song.pipeline.motion.types import Trajectory  # noqa: E402
 from song.runtime.avatars import AvatarCollider  # noqa: E402
@@ -63,12 +65,13 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=20)
     args = parser.parse_args()
     ep, collider = synthetic(args.avatars, args.gaussians)
+    ep = dataclasses.replace(ep, params=RuntimeParams(robot=RobotConfig(max_steps=200, eta_col=10**9)))
     policy = StraightPolicy()
     steps = 0
     start = time.perf_counter()
     outcomes = []
     for _ in range(args.episodes):
-        runner = EpisodeRunner(ep, collider, RobotConfig(max_steps=200, eta_col=10**9))
+        runner = EpisodeRunner(ep, collider)
         policy.reset(ep)
         while runner.outcome is None:
             runner.step(*policy.act(runner.observation()))

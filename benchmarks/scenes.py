@@ -21,7 +21,7 @@ from _common import ROOT, emit, folder_bytes  # noqa: E402
 from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.datasets.scenes.generate import generate_scenes  # noqa: E402
 from song.datasets.scenes.procthor import import_procthor  # noqa: E402
-from song.geometry.gridpath import clearance  # noqa: E402
+from song.geometry.freespace import erode  # noqa: E402
 
 
 def main() -> None:
@@ -41,7 +41,7 @@ def main() -> None:
         for r in results:
             package = load_scene_package(r.path)
             grid = package.occupancy
-            legal = clearance(grid.free, grid.resolution) >= 0.25 + grid.resolution / 2
+            legal = erode(grid.free, grid.resolution, 0.25)
             _, parts = ndimage.label(legal, structure=np.ones((3, 3)))
             houses[r.scene_id] = {
                 "free_m2": round(float(grid.free.sum()) * grid.resolution**2, 1),

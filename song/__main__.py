@@ -1,3 +1,5 @@
+"""``python -m song``: the command line."""
+
 from song.cli import app
 
 app()

@@ -16,6 +16,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from song.errors import ConfigError
 from song.util import sha256_json
 
+DEFAULT_FPS = 30  # pedestrian trajectories and motion (paper: 30 FPS); releases record the value used
+
 
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -58,7 +60,8 @@ class IntentsConfig(_Section):
 class CrowdConfig(_Section):
     """Navmesh + ORCA crowd planning (paper: Recast/DetourCrowd)."""
 
-    fps: int = Field(30, ge=1, le=240, description="simulation and output rate, frames/s (paper: 30)")
+    fps: int = Field(DEFAULT_FPS, ge=1, le=240, description="simulation and output rate, frames/s (paper: 30)")
+    avoidance: Literal["orca"] = Field("orca", description="local-avoidance model (song.pipeline.crowd.avoidance)")
     agent_radius_m: float = Field(0.25, gt=0.0, le=1.0, description="pedestrian body radius, m")
     neighbor_dist_m: float = Field(5.0, gt=0.0, description="ORCA neighbour search distance, m")
     max_neighbors: int = Field(10, ge=1, description="ORCA neighbours considered per agent")
@@ -179,12 +182,28 @@ class SongConfig(_Section):
     camera: CameraConfig = CameraConfig()
 
 
+def config_value(config: BaseModel, key: str) -> Any:
+    """The JSON value of a dotted config key (``"crowd"`` or ``"crowd.agent_radius_m"``).
+
+    Raises:
+        ConfigError: no such section or field.
+    """
+    value: Any = config
+    for part in key.split("."):
+        if not isinstance(value, BaseModel) or part not in type(value).model_fields:
+            raise ConfigError("<config>", key, "no such config section or field")
+        value = getattr(value, part)
+    return value.model_dump(mode="json") if isinstance(value, BaseModel) else value
+
+
 def config_hash(config: BaseModel) -> str:
     """sha256 of a config's canonical JSON; written into every output that the config shaped."""
     return sha256_json(config.model_dump(mode="json"))
 
 
-def _read_mapping(path: Path) -> dict[str, Any]:
+def read_config_mapping(path: str | Path) -> dict[str, Any]:
+    """The raw mapping of a TOML/YAML config file (not validated: :func:`load_config` does that)."""
+    path = Path(path)
     suffix = path.suffix.lower()
     try:
         text = path.read_text(encoding="utf-8")
@@ -208,13 +227,44 @@ def _read_mapping(path: Path) -> dict[str, Any]:
     return data
 
 
+def parse_assignments(assignments: list[str]) -> dict[str, Any]:
+    """``["crowd.agent_radius_m=0.3", "intents.llm=offline"]`` → ``{"crowd": {"agent_radius_m": 0.3}, ...}``.
+
+    Values are read as JSON when they parse (numbers, booleans, lists), else kept as strings. Nothing is
+    validated here beyond the form; :func:`load_config` validates the merged result.
+
+    Raises:
+        ConfigError: an assignment is not ``section.key=value`` or ``key=value``.
+    """
+    import json
+
+    out: dict[str, Any] = {}
+    for text in assignments:
+        key, sep, raw = text.partition("=")
+        parts = key.strip().split(".")
+        if not sep or not all(p.isidentifier() for p in parts) or len(parts) > 2:
+            raise ConfigError("--set", text, "expected SECTION.KEY=VALUE (e.g. crowd.agent_radius_m=0.3)")
+        try:
+            value = json.loads(raw)
+        except ValueError:
+            value = raw
+        if len(parts) == 1:
+            out[parts[0]] = value
+        else:
+            section = out.setdefault(parts[0], {})
+            if not isinstance(section, dict):
+                raise ConfigError("--set", text, f"'{parts[0]}' is set both as a value and as a section")
+            section[parts[1]] = value
+    return out
+
+
 def load_config(path: str | Path | None = None, **overrides: Any) -> SongConfig:
     """Load a :class:`SongConfig` from TOML/YAML (or defaults when ``path`` is None).
 
     ``overrides`` are top-level keys (``seed=3``) or ``section={...}`` dicts merged over the file.
     Raises :class:`ConfigError` naming the file and the first bad field.
     """
-    data: dict[str, Any] = {} if path is None else _read_mapping(Path(path))
+    data: dict[str, Any] = {} if path is None else read_config_mapping(path)
     for key, value in overrides.items():
         if isinstance(value, dict) and isinstance(data.get(key), dict):
             data[key] = {**data[key], **value}

@@ -39,6 +39,15 @@ def canonical_json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
 
 
+def read_json_object(path: str | Path) -> dict[str, Any]:
+    """A JSON file holding an object, as a dict; empty when the file is missing, unreadable or not an object."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 def sha256_json(obj: Any) -> str:
     """Hex sha256 of :func:`canonical_json` of ``obj``."""
     return sha256_bytes(canonical_json(obj).encode("utf-8"))

@@ -1,7 +1,7 @@
 """The ``song`` command line (Typer + rich). Thin: parse, call one library function, print.
 
 Each area adds its commands from its own module (``song/cli/<area>.py``) so that areas stay
-independent; :data:`COMMAND_MODULES` lists them and a module that does not exist yet is skipped.
+independent; :data:`COMMAND_MODULES` lists them.
 """
 
 from __future__ import annotations
@@ -21,11 +21,7 @@ app = typer.Typer(
 COMMAND_MODULES = (
     "song.cli.scenes",
     "song.cli.synth",
-    "song.cli.intents",
-    "song.cli.crowd",
-    "song.cli.motion",
-    "song.cli.bind",
-    "song.cli.avatars",
+    "song.cli.stages",
     "song.cli.avatars",
     "song.cli.grade",
     "song.cli.bench",
@@ -34,12 +30,9 @@ COMMAND_MODULES = (
 )
 
 for _module in COMMAND_MODULES:
-    try:
-        importlib.import_module(_module)
-    except ModuleNotFoundError as _exc:
-        if _exc.name != _module:
-            raise
+    importlib.import_module(_module)
 
 
 def main() -> None:  # pragma: no cover - console entry
+    """Run the command line."""
     app()

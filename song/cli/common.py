@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from song.config import SongConfig, load_config
+from song.config import SongConfig, load_config, parse_assignments
 from song.errors import SongError
 
 console = Console(stderr=False, highlight=False)
@@ -21,6 +21,13 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 ConfigOption = typer.Option(None, "--config", "-c", help="TOML/YAML config file (defaults: the paper's values)")
 SeedOption = typer.Option(None, "--seed", help="run seed (overrides the config)")
+SetOption = typer.Option(
+    None,
+    "--set",
+    metavar="SECTION.KEY=VALUE",
+    help="override one config value (repeatable), e.g. crowd.agent_radius_m=0.3",
+)
+WorkersOption = typer.Option(0, "--workers", "-j", min=0, help="worker processes (0 = all cores)")
 
 
 def handle_errors(func: F) -> F:
@@ -37,15 +44,11 @@ def handle_errors(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-def make_config(path: Path | None, seed: int | None = None, **sections: dict[str, Any]) -> SongConfig:
-    """Load the config file (or defaults) and apply CLI overrides (only non-None values)."""
-    overrides: dict[str, Any] = {}
+def make_config(path: Path | None, seed: int | None = None, sets: list[str] | None = None) -> SongConfig:
+    """Load the config file (or defaults) and apply ``--seed`` and ``--set`` overrides, all validated."""
+    overrides: dict[str, Any] = parse_assignments(sets or [])
     if seed is not None:
         overrides["seed"] = seed
-    for name, values in sections.items():
-        values = {k: v for k, v in values.items() if v is not None}
-        if values:
-            overrides[name] = values
     return load_config(path, **overrides)
 
 

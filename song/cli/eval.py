@@ -8,10 +8,12 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from song.cli import app
-from song.cli.common import ConfigOption, console, handle_errors, make_config
+from song.cli.common import ConfigOption, SetOption, console, err_console, handle_errors
+from song.config import parse_assignments, read_config_mapping
 from song.datasets.bench import open_benchmark
-from song.runtime.evaluate import iter_eval, write_results
+from song.runtime.evaluate import iter_eval, make_setup, write_results
 from song.runtime.metrics import markdown_table
+from song.runtime.params import apply_overrides
 
 
 @app.command("eval")
@@ -20,25 +22,40 @@ def eval_command(
     bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
     policy: list[str] = typer.Option(["social"], "--policy", help="straight | astar | social | module:Class"),
     difficulty: str | None = typer.Option(None, "--difficulty", help="easy | medium | hard (default: all)"),
+    sensors: str | None = typer.Option(None, "--sensors", help="comma-separated sensors (default: the policy's)"),
     out: Path = typer.Option(Path("runs/eval"), "--out", help="results folder"),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
     config: Path | None = ConfigOption,
+    sets: list[str] | None = SetOption,
+    override: bool = typer.Option(
+        False, "--override", help="allow [robot]/[camera] values that differ from the release's (marked unofficial)"
+    ),
 ) -> None:
-    """Run policies on every episode; write per-episode Parquet and the paper's metric table."""
-    cfg = make_config(config)
+    """Run policies on every episode; write per-episode Parquet and the paper's metric table.
+
+    The robot, camera and pedestrian parameters come from the release; a config file or ``--set`` that
+    changes them needs ``--override``, and the results then record the change.
+    """
     release = open_benchmark(bench)
+    requested = read_config_mapping(config) if config else {}
+    for section, values in parse_assignments(sets or []).items():
+        requested[section] = {**requested.get(section, {}), **values} if isinstance(values, dict) else values
+    params, changed = apply_overrides(release.params, requested, override, str(config or "--set"))
+    for key, (old, new) in changed.items():
+        err_console.print(f"[yellow]override[/yellow] {key}: {old} → {new} (results marked unofficial)")
     episodes = list(release.episodes(difficulty=difficulty)) if difficulty else None
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:
+        setup = make_setup(release, name, sensors, params, changed)
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:
             task = progress.add_task(name, total=total)
-            for result in iter_eval(release, name, cfg.robot, episodes, workers):
+            for result in iter_eval(release, setup, episodes, workers):
                 results.append(result)
                 progress.advance(task)
-        table[name] = write_results(out, name, results, release)["metrics"]
+        table[name] = write_results(out, setup, results, release)["metrics"]
     text = markdown_table(table)
     (out / "results.md").write_text(text, encoding="utf-8")
     typer.echo(text)

@@ -11,20 +11,26 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from song.cli import app
-from song.cli.common import ConfigOption, SeedOption, console, handle_errors, make_config, status_table
-from song.pipeline.chain import SceneResult, iter_run, load_stages
-
-
-def default_workers() -> int:
-    import os
-
-    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+from song.cli.common import (
+    ConfigOption,
+    SeedOption,
+    SetOption,
+    WorkersOption,
+    console,
+    handle_errors,
+    make_config,
+    status_table,
+)
+from song.config import SongConfig
+from song.datasets.scenes import find_scene_packages
+from song.parallel import default_workers
+from song.pipeline.chain import RunSummary, SceneResult, iter_run, load_stages, summarize_run
 
 
 def run_chain_command(
     scenes: Path,
     out: Path,
-    cfg,
+    cfg: SongConfig,
     stage_names: list[str] | None,
     workers: int,
     executor: str,
@@ -40,6 +46,7 @@ def run_chain_command(
         ensure_pool(cfg.binding)  # build the default avatar pool once, before the workers start
     results: list[SceneResult] = []
     started = time.perf_counter()
+    total = len(find_scene_packages(scenes)) if scene_ids is None else len(scene_ids)
     iterator = iter_run(
         scenes, out, cfg, stage_names, workers=workers, executor=executor, scheduler=scheduler, scene_ids=scene_ids
     )
@@ -58,65 +65,39 @@ def run_chain_command(
             TimeRemainingColumn(),
         )
         with Progress(*columns, console=console, transient=False) as progress:
-            tasks = {name: progress.add_task(name, total=None, failed=0) for name in names}
+            tasks = {name: progress.add_task(name, total=total, failed=0) for name in names}
             for result in iterator:
                 results.append(result)
                 for name in names:
                     status = result.stages.get(name)
                     failed = progress.tasks[tasks[name]].fields["failed"] + (status == "failed")
                     progress.update(tasks[name], advance=1, failed=failed)
-    _print_summary(results, names, time.perf_counter() - started, out, quiet)
+    _print_summary(summarize_run(results, names), time.perf_counter() - started, out, quiet, cfg.crowd.fps)
     return results
 
 
-def _crowd_totals(out: Path, results: list[SceneResult]) -> tuple[int, int]:
-    """Pedestrians and pedestrian-frames over the run's scenes (from the crowd files' metadata)."""
-    import pyarrow.parquet as pq
-
-    peds = frames = 0
-    for result in results:
-        path = out / "scenes" / result.scene_id / "crowd.parquet"
-        if result.status != "failed" and path.is_file():
-            meta = pq.read_metadata(path)
-            frames += meta.num_rows
-            status = json.loads((path.parent / "crowd_status.json").read_text())
-            peds += sum(v["status"] != "removed" for v in status.values())
-    return peds, frames
-
-
-def _print_summary(results: list[SceneResult], names: list[str], wall: float, out: Path, quiet: bool) -> None:
-    results = sorted(results, key=lambda r: r.scene_id)
-    peds, frames = _crowd_totals(out, results)
-    counts = {status: sum(r.status == status for r in results) for status in ("ok", "skipped", "failed")}
-    per_stage = {name: sum(r.seconds.get(name, 0.0) for r in results) for name in names}
+def _print_summary(summary: RunSummary, wall: float, out: Path, quiet: bool, fps: int) -> None:
+    peds = summary.totals.get("pedestrians", 0)
+    frames = summary.totals.get("pedestrian_frames", 0)
     if quiet:
-        summary = {
+        record = {
             "event": "summary",
-            "scenes": counts,
-            "stage_seconds": per_stage,
+            "scenes": summary.scenes,
+            "stage_seconds": summary.stage_seconds,
             "wall_seconds": round(wall, 3),
             "pedestrians": peds,
             "pedestrian_frames": frames,
         }
-        sys.stdout.write(json.dumps(summary, sort_keys=True) + "\n")
+        sys.stdout.write(json.dumps(record, sort_keys=True) + "\n")
         return
-    failed_rows = [{"scene": r.scene_id, "status": r.status, "error": r.error} for r in results if r.status == "failed"]
-    if failed_rows:
-        console.print(status_table("failed scenes", failed_rows, ["scene", "status", "error"]))
-    rows = [
-        {
-            "stage": name,
-            "ok": sum(r.stages.get(name) == "ok" for r in results),
-            "skipped": sum(r.stages.get(name) == "skipped" for r in results),
-            "failed": sum(r.stages.get(name) == "failed" for r in results),
-            "cpu s": f"{per_stage[name]:.2f}",
-        }
-        for name in names
-    ]
-    console.print(status_table(f"run {out}", rows, ["stage", "ok", "skipped", "failed", "cpu s"]))
+    if summary.failed:
+        rows = [{"scene": scene, "status": "failed", "error": error} for scene, error in summary.failed]
+        console.print(status_table("failed scenes", rows, ["scene", "status", "error"]))
+    counts = summary.scenes
     console.print(
         f"scenes: {counts['ok']} ok, {counts['skipped']} unchanged, {counts['failed']} failed in {wall:.1f} s wall; "
-        f"{peds} pedestrians, {frames} pedestrian-frames at 30 FPS"
+        f"{peds} pedestrians, {frames} pedestrian-frames at {fps} FPS; "
+        + ", ".join(f"{name} {seconds:.2f} cpu s" for name, seconds in summary.stage_seconds.items())
     )
 
 
@@ -127,14 +108,15 @@ def synth(
     out: Path = typer.Option(..., "--out", help="run folder (created; re-running resumes)"),
     config: Path | None = ConfigOption,
     seed: int | None = SeedOption,
-    workers: int = typer.Option(0, "--workers", "-j", min=0, help="worker processes (0 = all cores)"),
+    sets: list[str] | None = SetOption,
+    workers: int = WorkersOption,
     executor: str = typer.Option("process", "--executor", help="serial | process | dask"),
     scheduler: str | None = typer.Option(None, "--scheduler", help="dask scheduler, e.g. tcp://host:8786"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="JSON line per scene instead of progress bars"),
     stages: str | None = typer.Option(None, "--stages", help="comma-separated subset of stages (default: all)"),
 ) -> None:
     """Run every registered per-scene stage on every scene package (resumable, parallel)."""
-    cfg = make_config(config, seed)
+    cfg = make_config(config, seed, sets)
     names = [name.strip() for name in stages.split(",")] if stages else None
     results = run_chain_command(scenes, out, cfg, names, workers or default_workers(), executor, scheduler, quiet)
     if any(r.status == "failed" for r in results):

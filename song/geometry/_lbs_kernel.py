@@ -10,13 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
-
-try:
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
-HAVE_NUMBA = numba is not None
 
 
 def _rotations(indices: np.ndarray, weights: np.ndarray, quats: np.ndarray, rots: np.ndarray) -> np.ndarray:
@@ -59,4 +54,4 @@ def _rotations(indices: np.ndarray, weights: np.ndarray, quats: np.ndarray, rots
     return out
 
 
-rotations_kernel = numba.njit(cache=True, nogil=True)(_rotations) if HAVE_NUMBA else None
+rotations_kernel = numba.njit(cache=True, nogil=True)(_rotations)

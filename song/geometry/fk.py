@@ -72,7 +72,10 @@ def skinning_transforms(rest_joints: Any, local_quats: Any, root_pos: Any, paren
     """World-from-rest skinning transforms ``A_j = [R_j | p_j − R_j · rest_j]``.
 
     Args:
-        rest_joints, local_quats, root_pos, parents: as for :func:`forward_kinematics`.
+        rest_joints: as for :func:`forward_kinematics`.
+        local_quats: as for :func:`forward_kinematics`.
+        root_pos: as for :func:`forward_kinematics`.
+        parents: as for :func:`forward_kinematics`.
 
     Returns:
         ``(..., J, 3, 4)``: a rest-pose point ``x`` goes to ``A[..., :, :3] @ x + A[..., :, 3]``.

@@ -32,6 +32,9 @@ def world_to_cell(xy: np.ndarray, rows: int, resolution: float, origin: tuple[fl
 
     Args:
         xy: (..., 2) array of (x, y), metres.
+        rows: number of grid rows.
+        resolution: metres per cell.
+        origin: (x_min, y_min) of the grid's lower-left corner, metres.
 
     Returns:
         (..., 2) int64 array of (row, col).

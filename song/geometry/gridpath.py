@@ -1,5 +1,6 @@
-"""Geodesic distance fields on occupancy grids (8-connected, Euclidean step costs) and line-of-sight
-smoothing of grid paths.
+"""Geodesic distance fields on occupancy grids and line-of-sight smoothing of grid paths.
+
+Graphs are 8-connected with Euclidean step costs.
 
 Distances run in scipy's compiled Dijkstra (``scipy.sparse.csgraph``) over a graph built once per grid
 with vectorised numpy: one call from a start gives the geodesic distance to every cell (many goals per
@@ -12,19 +13,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, sparse
+from scipy import sparse
 from scipy.sparse import csgraph
 
 SQRT2 = float(np.sqrt(2.0))
 _STEPS = ((0, 1, 1.0), (1, 0, 1.0), (1, 1, SQRT2), (1, -1, SQRT2))
-
-
-def clearance(free: np.ndarray, resolution: float) -> np.ndarray:
-    """Distance (m) from each cell centre to the nearest non-free cell centre; 0 on non-free cells.
-
-    The grid border counts as non-free (the world ends at the image edge).
-    """
-    return ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1] * resolution
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,9 @@ def two_bone_ik(
     """Solve the chain for new ``mid``/``end`` positions and the bone delta rotations.
 
     Args:
-        root, mid, end: ``(..., 3)`` current joint positions (bone lengths are taken from them), m.
+        root: ``(..., 3)`` current root joint positions (bone lengths are taken from the chain), m.
+        mid: ``(..., 3)`` current middle joint positions, m.
+        end: ``(..., 3)`` current end joint positions, m.
         target: ``(..., 3)`` desired ``end`` position, m.
         pole: ``(..., 3)`` direction the ``mid`` joint should bend towards (e.g. body forward).
         pole_old: pole that describes the *current* bend plane (default ``pole``).

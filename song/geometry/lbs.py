@@ -180,7 +180,7 @@ def lbs_rotations(skin: SkinnedGaussians, transforms: Any, block: int | None = N
     xp = _xp(skin.weights)
     frames, single = _frames_first(transforms)
     n_frames, n_joints = frames.shape[0], frames.shape[1]
-    if xp is np and rotations_kernel is not None and skin.top_indices is not None and block is None:
+    if xp is np and skin.top_indices is not None and block is None:
         rotations = np.ascontiguousarray(frames[..., :3], dtype=np.float64)
         posed = rotations_kernel(skin.top_indices, skin.top_weights, skin.quats, rotations)
         return posed[0] if single else posed

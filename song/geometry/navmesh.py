@@ -60,6 +60,7 @@ class NavmeshParams:
     contour_error: float
 
     def to_array(self) -> np.ndarray:
+        """The parameters as a float64 array (stored in navmesh.npz)."""
         return np.array(
             [NAVMESH_FORMAT, self.agent_radius, self.resolution, *self.origin, *self.shape, self.contour_error],
             dtype=np.float64,
@@ -67,6 +68,7 @@ class NavmeshParams:
 
     @classmethod
     def from_array(cls, a: np.ndarray) -> NavmeshParams:
+        """Inverse of :meth:`to_array`; refuses another navmesh format."""
         if int(a[0]) != NAVMESH_FORMAT:
             raise ValueError(f"navmesh format {int(a[0])} is not {NAVMESH_FORMAT}")
         return cls(float(a[1]), float(a[2]), (float(a[3]), float(a[4])), (int(a[5]), int(a[6])), float(a[7]))
@@ -105,8 +107,10 @@ def segments_blocked(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray)
     """Whether query segments p→q hit wall segments a→b (crossing or touching, not collinear).
 
     Args:
-        p, q: (..., 2) float64 query segment ends, m.
-        a, b: (..., 2) float64 wall segment ends, m (broadcast against p, q).
+        p: (..., 2) float64 query segment starts, m.
+        q: (..., 2) float64 query segment ends, m.
+        a: (..., 2) float64 wall segment starts, m (broadcast against p, q).
+        b: (..., 2) float64 wall segment ends, m.
 
     Returns:
         (...) bool. Collinear overlaps do not count (a path may run along a wall).
@@ -139,9 +143,11 @@ def funnel(portals_left: np.ndarray, portals_right: np.ndarray, start: np.ndarra
     """String pulling through a channel of portals (Mononen's simple stupid funnel algorithm).
 
     Args:
-        portals_left, portals_right: (M, 2) float64 portal ends, m; the left end as seen walking
-            from start to goal. Portal i is crossed after portal i − 1.
-        start, goal: (2,) float64, m; start lies before the first portal, goal after the last.
+        portals_left: (M, 2) float64 left portal ends (as seen walking from start to goal), m.
+            Portal i is crossed after portal i − 1.
+        portals_right: (M, 2) float64 right portal ends, m.
+        start: (2,) float64, m; it lies before the first portal.
+        goal: (2,) float64, m; it lies after the last portal.
 
     Returns:
         (K, 2) float64 corners from start to goal (the shortest path through the channel).
@@ -233,10 +239,12 @@ class Navmesh:
     # ---- derived arrays -------------------------------------------------------------------------
     @property
     def seg_a(self) -> np.ndarray:
+        """(S, 2) start points of the boundary segments, m."""
         return self.vertices[self.segments[:, 0]]
 
     @property
     def seg_b(self) -> np.ndarray:
+        """(S, 2) end points of the boundary segments, m."""
         return self.vertices[self.segments[:, 1]]
 
     def _hash(self) -> dict:
@@ -351,7 +359,9 @@ class Navmesh:
         """(N,) bool: the segments p→q (points on the mesh) stay on the mesh (touching walls is allowed).
 
         Args:
-            p, q: (N, 2) float64, m.
+            p: (N, 2) float64 segment starts, m.
+            q: (N, 2) float64 segment ends, m.
+            chunk: segments tested per batch (bounds the temporary arrays).
         """
         p, q = np.atleast_2d(p).astype(np.float64), np.atleast_2d(q).astype(np.float64)
         d = q - p
@@ -500,7 +510,8 @@ class Navmesh:
         """Shortest path on the mesh between two points (snapped to the mesh first).
 
         Args:
-            start, goal: (2,) float64, m.
+            start: (2,) float64, m.
+            goal: (2,) float64, m.
             max_snap: farthest an end may be from the mesh, m.
             allow_partial: when the goal is in another mesh part, return a path to the point of the
                 start's part nearest to the goal (status ``partial``) instead of ``unreachable``.
@@ -537,7 +548,8 @@ def trace_legal(legal: np.ndarray, resolution: float, origin: tuple[float, float
 
     Args:
         legal: (rows, cols) bool grid of legal centres (image rows north-up, see ``song.geometry.grid``).
-        resolution: cell size, m. origin: (x_min, y_min) of the grid, m.
+        resolution: cell size, m.
+        origin: (x_min, y_min) of the grid, m.
     """
     import cv2
     import shapely
@@ -698,7 +710,8 @@ def build_navmesh(
 
     Args:
         legal: (rows, cols) bool, image rows north-up.
-        resolution: m per cell. origin: (x_min, y_min), m.
+        resolution: m per cell.
+        origin: (x_min, y_min), m.
         agent_radius: the erosion radius, m (recorded in the parameters).
         contour_error: simplification error ε, m (about one cell is Recast's default).
     """

@@ -267,6 +267,7 @@ def smooth_quats(q: np.ndarray, sigma_frames: float, axis: int = 0) -> np.ndarra
     Args:
         q: ``(..., 4)`` unit quaternions with time along ``axis``.
         sigma_frames: Gaussian standard deviation in frames (``0`` returns a copy).
+        axis: the time axis of ``q``.
 
     Returns:
         Unit quaternions, same shape, ``w ≥ 0`` not enforced (signs stay continuous).

@@ -87,15 +87,3 @@ def rest_joints(height_m: float | np.ndarray = 1.75) -> np.ndarray:
     """
     height = np.asarray(height_m, dtype=np.float64)
     return _REST_UNIT * height[..., None, None]
-
-
-def rest_offsets(height_m: float | np.ndarray = 1.75) -> np.ndarray:
-    """Offsets of each joint from its parent in the rest pose (the root's offset is its position).
-
-    Returns:
-        (24, 3) or (B, 24, 3) float64, metres.
-    """
-    joints = rest_joints(height_m)
-    offsets = joints.copy()
-    offsets[..., 1:, :] = joints[..., 1:, :] - joints[..., PARENTS[1:], :]
-    return offsets

@@ -53,6 +53,7 @@ class AvatarCollider:
     volume: str = "sphere"
 
     def count(self, t: float, robot_xy: np.ndarray) -> int:
+        """Posed Gaussian centres of nearby avatars inside the robot volume at robot_xy, time t."""
         _, xy, _ = pedestrian_states(self.tracks, t)
         if len(xy) == 0:
             return 0
@@ -95,20 +96,19 @@ def proxy_poser(tracks: list[PedestrianTrack]) -> Callable[[int, float], np.ndar
     return pose
 
 
-def make_collider(episode, config) -> AvatarCollider:
+def make_collider(episode) -> AvatarCollider:
     """The collider for an episode: posed Gaussian avatars when the release has caches, else body proxies.
 
-    Args:
-        episode: a :class:`song.datasets.bench.Episode`.
-        config: a :class:`song.config.RobotConfig` (radius, height, volume).
+    The robot volume (radius, centre height, shape) comes from ``episode.params.robot``.
     """
+    robot = episode.params.robot
     pose = gaussian_poser(episode) if any(a.cache_path for a in episode.avatars) else None
     return AvatarCollider(
         episode.pedestrians,
         pose or proxy_poser(episode.pedestrians),
-        radius=config.radius_m,
-        height=config.collision_height_m,
-        volume=config.collision_volume,
+        radius=robot.radius_m,
+        height=robot.collision_height_m,
+        volume=robot.collision_volume,
     )
 
 

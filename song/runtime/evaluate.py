@@ -1,22 +1,32 @@
-"""``song eval``: run a policy over a release's episodes; per-episode Parquet + summary (DESIGN §8)."""
+"""``song eval``: run a policy over a release's episodes; per-episode Parquet + summary (DESIGN §8).
+
+Every result file records what produced it: the release (version, schema, fingerprint), the policy,
+the sensors with their parameters, the runtime parameters used, and any override of the release's
+recorded parameters (results with overrides are marked ``"official": false``).
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import io
 import json
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from song.config import RobotConfig
 from song.datasets.bench import Benchmark, Episode, open_benchmark
-from song.runtime.avatars import AvatarCollider, make_collider
+from song.datasets.bench.schema import DIFFICULTIES
+from song.datasets.bench.types import RuntimeParams
+from song.parallel import parallel_map
+from song.runtime.avatars import make_collider
 from song.runtime.loop import EpisodeResult, run_episode
 from song.runtime.metrics import aggregate, markdown_table
-from song.runtime.policies import load_policy
+from song.runtime.policies import load_policy, policy_sensors
+from song.runtime.sensors import SensorSuite, parse_sensor_names
 from song.util import write_bytes_atomic, write_json_atomic, write_text_atomic
 
 RESULTS_SCHEMA = pa.schema(
@@ -43,37 +53,63 @@ RESULTS_SCHEMA = pa.schema(
 
 
 @dataclass(frozen=True)
+class EvalSetup:
+    """How a policy is evaluated: its sensors and the runtime parameters (with what was overridden).
+
+    Attributes:
+        policy: a baseline name or ``module:Class``.
+        sensors: the sensor names the policy receives.
+        params: the effective runtime parameters.
+        overrides: ``{"robot.max_speed_mps": [release value, used value], ...}``; empty for official runs.
+        sensor_options: per-sensor keyword options.
+    """
+
+    policy: str
+    sensors: tuple[str, ...]
+    params: RuntimeParams
+    overrides: dict[str, list[Any]] = field(default_factory=dict)
+    sensor_options: dict[str, dict] = field(default_factory=dict)
+
+
+def make_setup(
+    bench: Benchmark,
+    policy: str,
+    sensors: str | list[str] | None = None,
+    params: RuntimeParams | None = None,
+    overrides: dict[str, list[Any]] | None = None,
+) -> EvalSetup:
+    """The setup of one policy: its declared sensors unless ``sensors`` names others."""
+    names = parse_sensor_names(sensors) if sensors else policy_sensors(load_policy(policy))
+    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}))
+
+
+@dataclass(frozen=True)
 class EvalJob:
+    """One episode of one policy (picklable for worker processes)."""
+
     bench: str
     episode_id: str
-    policy: str
-    robot: dict[str, Any]
+    setup: EvalSetup
 
 
 def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  # noqa: B006 - per-process cache
     if job.bench not in cache:
         cache[job.bench] = open_benchmark(job.bench)
-    episode = cache[job.bench].episode(job.episode_id)
-    config = RobotConfig.model_validate(job.robot)
-    return run_episode(episode, load_policy(job.policy), make_collider(episode, config), config)
+    bench = cache[job.bench]
+    setup = job.setup
+    episode = dataclasses.replace(bench.episode(job.episode_id), params=setup.params)
+    sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
+    return run_episode(episode, load_policy(setup.policy), make_collider(episode), sensors)
 
 
 def iter_eval(
-    bench: Benchmark, policy: str, robot: RobotConfig, episodes: list[Episode] | None = None, workers: int = 1
+    bench: Benchmark, setup: EvalSetup | str, episodes: list[Episode] | None = None, workers: int = 1
 ) -> Iterator[EpisodeResult]:
-    """Evaluate ``policy`` on every episode (or ``episodes``); results stream in completion order."""
+    """Evaluate a policy on every episode (or ``episodes``); results stream in completion order."""
+    setup = make_setup(bench, setup) if isinstance(setup, str) else setup
     ids = [e.episode_id for e in episodes] if episodes is not None else bench.episode_ids()
-    jobs = [EvalJob(str(bench.root), eid, policy, robot.model_dump()) for eid in ids]
-    if workers <= 1:
-        for job in jobs:
-            yield _run_job(job)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        for future in as_completed([pool.submit(_run_job, job) for job in jobs]):
-            yield future.result()
+    jobs = [EvalJob(str(bench.root), eid, setup) for eid in ids]
+    yield from parallel_map(_run_job, jobs, workers)
 
 
 def results_table(results: list[EpisodeResult], policy: str) -> pa.Table:
@@ -106,9 +142,9 @@ def results_table(results: list[EpisodeResult], policy: str) -> pa.Table:
 
 
 def summarize(results: list[EpisodeResult]) -> dict[str, dict[str, float]]:
-    """The metric row per difficulty (hard, medium, easy order as in the paper) and overall."""
+    """The metric row per difficulty (easy, medium, hard) and overall."""
     by = {}
-    for difficulty in ("easy", "medium", "hard"):
+    for difficulty in DIFFICULTIES:
         subset = [r.metrics for r in results if r.difficulty == difficulty]
         if subset:
             by[difficulty] = aggregate(subset)
@@ -116,24 +152,39 @@ def summarize(results: list[EpisodeResult]) -> dict[str, dict[str, float]]:
     return by
 
 
-def write_results(out_dir: Path, policy: str, results: list[EpisodeResult], bench: Benchmark) -> dict[str, Any]:
+def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
+    """What produced a set of results: release, policy, sensors, parameters, overrides."""
+    sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
+    return {
+        "release": {
+            "path": str(bench.root),
+            "version": bench.version,
+            "schema_version": bench.info.schema_version,
+            "fingerprint": bench.info.fingerprint,
+        },
+        "policy": setup.policy,
+        "sensors": sensors.describe(),
+        "params": setup.params.to_json(),
+        "overrides": setup.overrides,
+        "official": not setup.overrides,
+    }
+
+
+def _json_safe(obj: Any) -> Any:
+    return json.loads(json.dumps(obj, allow_nan=True).replace("NaN", "null").replace("Infinity", "null"))
+
+
+def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult], bench: Benchmark) -> dict[str, Any]:
     """Write ``<policy>.parquet``, ``<policy>.json`` and ``<policy>.md`` into ``out_dir``."""
-    import io
-
     out_dir.mkdir(parents=True, exist_ok=True)
-    safe = policy.replace(":", "_").replace("/", "_")
+    safe = setup.policy.replace(":", "_").replace("/", "_")
+    about = provenance(bench, setup)
+    table = results_table(results, setup.policy)
+    table = table.replace_schema_metadata({b"song.eval": json.dumps(about, sort_keys=True).encode()})
     buffer = io.BytesIO()
-    pq.write_table(results_table(results, policy), buffer, compression="zstd")
+    pq.write_table(table, buffer, compression="zstd")
     write_bytes_atomic(out_dir / f"{safe}.parquet", buffer.getvalue())
-    summary = {"benchmark": str(bench.root), "version": bench.version, "policy": policy, "metrics": summarize(results)}
-    write_json_atomic(out_dir / f"{safe}.json", json.loads(json.dumps(summary, allow_nan=True).replace("NaN", "null")))
-    write_text_atomic(out_dir / f"{safe}.md", markdown_table({policy: summary["metrics"]}))
+    summary = {**about, "benchmark": str(bench.root), "version": bench.version, "metrics": summarize(results)}
+    write_json_atomic(out_dir / f"{safe}.json", _json_safe(summary))
+    write_text_atomic(out_dir / f"{safe}.md", markdown_table({setup.policy: summary["metrics"]}))
     return summary
-
-
-def collider_for(episode: Episode, robot: RobotConfig) -> AvatarCollider:
-    """The avatar collider an evaluation uses (kept as a seam for tests)."""
-    return make_collider(episode, robot)
-
-
-ProgressCallback = Callable[[EpisodeResult], None]

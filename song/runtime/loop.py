@@ -1,29 +1,32 @@
 """The closed-loop episode runner (DESIGN §8; paper "Evaluation protocol").
 
-Per 10 Hz step: observe → act → clip to the robot's limits → integrate. Static contact restores the
-last safe pose and counts C_obs (at δ_obs = 5 the episode fails); a robot that has not moved for 10
-steps is also turned toward the most open direction of its 70° field of view. Any avatar collision
-(more than η_col Gaussian centres inside the robot volume) fails the episode. Success when the goal is
-closer than 1 m. Otherwise a time-out after T_max steps. Exactly one outcome per episode.
+Per control step: observe (the selected sensors) → act → clip to the robot's limits → integrate.
+Static contact restores the last safe pose and counts C_obs (at δ_obs the episode fails); a robot
+that has not moved for ``stuck_steps`` steps is also turned toward the most open direction of its
+field of view. Any avatar collision (more than η_col Gaussian centres inside the robot volume) fails
+the episode. Success when the goal is closer than the goal radius. Otherwise a time-out after T_max
+steps. Exactly one outcome per episode. Every parameter comes from ``episode.params`` (the release's
+recorded values, or explicit overrides).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from song.config import RobotConfig
 from song.datasets.bench.types import Episode, pedestrian_states
 from song.runtime.avatars import AvatarCollider
 from song.runtime.metrics import EpisodeMetrics, episode_metrics
-from song.runtime.observation import Observation, ScanConfig, observe
-from song.runtime.policies import Policy
+from song.runtime.policies import Policy, policy_sensors
 from song.runtime.robot import Pose, clamp_command, integrate
+from song.runtime.sensors import RobotView, SensorSuite
 from song.runtime.world import StaticWorld
 
 MOVED_EPS_M = 0.02  # "has not moved": less than this displacement over the last stuck_steps steps
+OPEN_RANGE_M = 5.0  # ray length when looking for the most open direction
 
 
 @dataclass
@@ -43,29 +46,21 @@ class EpisodeResult:
     events: list[tuple[int, str]] = field(default_factory=list)
 
 
-def _most_open_yaw(pose: Pose, world: StaticWorld, fov: float, max_range: float = 5.0) -> float:
+def _most_open_yaw(pose: Pose, world: StaticWorld, fov: float) -> float:
     angles = pose.yaw + np.linspace(-fov / 2, fov / 2, 15)
-    ranges = world.cast(pose.xy, angles, max_range)
+    ranges = world.cast(pose.xy, angles, OPEN_RANGE_M)
     return float(angles[int(np.argmax(ranges))])
 
 
 class EpisodeRunner:
     """Steps one episode; used by :func:`run_episode` and the Gymnasium env."""
 
-    def __init__(
-        self,
-        episode: Episode,
-        collider: AvatarCollider,
-        config: RobotConfig | None = None,
-        scan: ScanConfig | None = None,
-        privileged: bool = False,
-    ) -> None:
+    def __init__(self, episode: Episode, collider: AvatarCollider, sensors: SensorSuite | None = None) -> None:
         self.episode = episode
-        self.cfg = config or RobotConfig()
-        self.scan = scan or ScanConfig()
+        self.cfg = episode.params.robot
+        self.sensors = sensors if sensors is not None else SensorSuite.build(("state",), episode.params)
         self.world = StaticWorld(episode.static_map)
         self.collider = collider
-        self.privileged = privileged
         self.dt = 1.0 / self.cfg.control_hz
         self.max_yaw_rate = np.deg2rad(self.cfg.max_yaw_rate_deg_s)
         self.pose = Pose(float(episode.start_xy[0]), float(episode.start_xy[1]), float(episode.start_yaw))
@@ -78,20 +73,24 @@ class EpisodeRunner:
         self.poses = [self.pose]
         self.nearest = [self._nearest(self.time)]
         self.events: list[tuple[int, str]] = []
+        self.sensors.reset(episode)
 
     @property
     def time(self) -> float:
+        """Scenario time of the current step, s."""
         return self.episode.t0 + self.step_index * self.dt
 
     def _nearest(self, t: float) -> float:
         _, xy, _ = pedestrian_states(self.episode.pedestrians, t)
         return float(np.linalg.norm(xy - self.pose.xy, axis=1).min()) if len(xy) else float("inf")
 
-    def observation(self) -> Observation:
-        _, xy, vel = pedestrian_states(self.episode.pedestrians, self.time)
-        return observe(
-            self.time, self.pose, self.command, self.episode.goal_xy, self.world, xy, vel, self.scan, self.privileged
-        )
+    def view(self) -> RobotView:
+        """What the sensors read at the current step."""
+        return RobotView(self.time, self.pose, self.command.copy(), self.episode, self.world)
+
+    def observation(self) -> dict[str, Any]:
+        """The selected sensors' outputs at the current step."""
+        return self.sensors.observe(self.view())
 
     def step(self, v: float, omega: float) -> str | None:
         """Apply one command; returns the outcome when the episode ends, else None."""
@@ -128,6 +127,7 @@ class EpisodeRunner:
         return self.outcome
 
     def result(self) -> EpisodeResult:
+        """The episode's outcome, log and metrics (once it has ended)."""
         if self.outcome is None:
             raise RuntimeError("episode has not ended")
         traj = np.array([[p.x, p.y, p.yaw] for p in self.poses])
@@ -140,6 +140,7 @@ class EpisodeRunner:
             self.episode.optimal_time,
             nearest,
             self.cfg.psc_threshold_m,
+            self.cfg.max_speed_mps,
         )
         return EpisodeResult(
             self.episode.episode_id,
@@ -160,12 +161,15 @@ def run_episode(
     episode: Episode,
     policy: Policy,
     collider: AvatarCollider,
-    config: RobotConfig | None = None,
-    scan: ScanConfig | None = None,
+    sensors: SensorSuite | None = None,
     on_step: Callable[[EpisodeRunner], None] | None = None,
 ) -> EpisodeResult:
-    """Run ``policy`` on ``episode`` until it ends; deterministic for a deterministic policy."""
-    runner = EpisodeRunner(episode, collider, config, scan, privileged=bool(getattr(policy, "privileged", False)))
+    """Run ``policy`` on ``episode`` until it ends; deterministic for a deterministic policy.
+
+    ``sensors`` defaults to the ones the policy declares (:func:`song.runtime.policies.policy_sensors`).
+    """
+    sensors = sensors or SensorSuite.build(policy_sensors(policy), episode.params, max(64, len(episode.pedestrians)))
+    runner = EpisodeRunner(episode, collider, sensors)
     policy.reset(episode)
     while runner.outcome is None:
         v, omega = policy.act(runner.observation())

@@ -8,7 +8,8 @@ Choices (also in docs/metrics.md):
   episode's steps whose nearest-avatar distance is ≥ 0.5 m (steps with nobody present count as
   compliant); MinD is the episode's minimum (inf when nobody is ever present; such episodes are left
   out of the MinD mean).
-- JK: κ_t = |ẋÿ − ẏẍ| / |v|³ with |v| fixed to 0.5 m/s (the paper), derivatives by central
+- JK: κ_t = |ẋÿ − ẏẍ| / |v|³ with |v| fixed to the robot's speed limit (0.5 m/s in the paper, read
+  from the release), derivatives by central
   differences at the control period; JK = RMS of Δκ/Δt over the episode (0 for fewer than 4 poses).
 All rates are percentages in the summary (0–100); per-episode values are fractions.
 """
@@ -21,7 +22,6 @@ from dataclasses import dataclass
 import numpy as np
 
 OUTCOMES = ("success", "obstacle", "human", "timeout")
-NOMINAL_SPEED = 0.5
 
 
 def spl(success: np.ndarray, length: np.ndarray, optimal_length: np.ndarray) -> np.ndarray:
@@ -47,10 +47,10 @@ def personal_space_compliance(nearest: np.ndarray, threshold: float = 0.5) -> fl
     return float(np.mean(nearest >= threshold)) if nearest.size else 1.0
 
 
-def jerk(xy: np.ndarray, dt: float, speed: float = NOMINAL_SPEED) -> float:
+def jerk(xy: np.ndarray, dt: float, speed: float) -> float:
     """RMS of Δκ/Δt along a (K, 2) trajectory sampled every ``dt`` seconds.
 
-    κ = |ẋÿ − ẏẍ| / |v|³ with |v| = ``speed`` (paper: 0.5 m/s). Central differences: ÿ from three
+    κ = |ẋÿ − ẏẍ| / |v|³ with |v| = ``speed`` (paper: the robot's 0.5 m/s). Central differences: ÿ from three
     consecutive poses, ẏ the mean of the two adjacent first differences (exact on circles).
     """
     xy = np.asarray(xy, dtype=np.float64)
@@ -85,9 +85,14 @@ def episode_metrics(
     optimal_length: float,
     optimal_time: float,
     nearest: np.ndarray,
-    psc_threshold: float = 0.5,
+    psc_threshold: float,
+    nominal_speed: float,
 ) -> EpisodeMetrics:
-    """Per-episode metrics from the logged robot poses (K, 2) and nearest-avatar distances (K,)."""
+    """Per-episode metrics from the logged robot poses (K, 2) and nearest-avatar distances (K,).
+
+    ``psc_threshold`` (m) and ``nominal_speed`` (m/s, the |v| of the jerk's curvature) come from the
+    release's robot parameters.
+    """
     if outcome not in OUTCOMES:
         raise ValueError(f"unknown outcome {outcome!r}; expected one of {OUTCOMES}")
     nearest = np.asarray(nearest, dtype=np.float64)
@@ -99,7 +104,7 @@ def episode_metrics(
         optimal_time=optimal_time,
         psc=personal_space_compliance(nearest, psc_threshold),
         min_distance=float(nearest.min()) if nearest.size else float("inf"),
-        jerk=jerk(xy, dt),
+        jerk=jerk(xy, dt, nominal_speed),
     )
 
 

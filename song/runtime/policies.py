@@ -4,57 +4,83 @@
 - ``astar``: pure pursuit of the episode's smoothed A* path (blind to people).
 - ``social``: privileged upper bound: the A* path plus a velocity-obstacle rollout planner that
   sees every pedestrian's position and velocity and the static map (like the paper's teleop row).
-A user's policy loads with ``--policy module:Class`` (a class with ``reset`` and ``act``).
+
+A policy declares the sensors it reads (``sensors``); the robot's limits, its radius and the
+pedestrians' body radius come from the episode's runtime parameters (the release's recorded values),
+never from constants here. A user's policy loads with ``--policy module:Class``.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from song.config import RobotConfig
 from song.datasets.bench.types import Episode
 from song.errors import SongError
-from song.runtime.observation import BODY_RADIUS_M, Observation
 from song.runtime.robot import wrap_angle
 from song.runtime.world import StaticWorld
 
-MAX_SPEED = 0.5
 # soft cost on predicted gaps to people below PROXIMITY_M (m); at 1.0 m the robot preferred turning on the
 # spot to passing a standing person at 0.8 m and timed out in doorways (demo: easy SR 89.6 % → 97.9 % at 0.8 m)
 PROXIMITY_M, PROXIMITY_WEIGHT = 0.8, 0.5
-MAX_YAW_RATE = np.deg2rad(45.0)
+WALL_MARGIN_M = 0.03  # the social planner keeps this much more than its radius from walls
+DEFAULT_SENSORS = ("state", "scan")  # what a user policy that declares no sensors receives
 
 
 @runtime_checkable
 class Policy(Protocol):
-    """A robot policy: ``reset`` once per episode, then ``act`` each 10 Hz step → (v m/s, ω rad/s)."""
+    """A robot policy: ``reset`` once per episode, then ``act`` each 10 Hz step → (v m/s, ω rad/s).
 
-    privileged: bool
+    Attributes:
+        sensors: names of the sensors whose outputs ``act`` reads (``observation[name]``).
+    """
 
-    def reset(self, episode: Episode) -> None: ...
+    sensors: tuple[str, ...]
 
-    def act(self, observation: Observation) -> tuple[float, float]: ...
+    def reset(self, episode: Episode) -> None:
+        """Prepare for ``episode`` (its map, goal, path, and ``episode.params`` limits)."""
+        ...
+
+    def act(self, observation: dict[str, Any]) -> tuple[float, float]:
+        """The command (v m/s, ω rad/s) for this step's ``{sensor: output}`` observation."""
+        ...
 
 
-def steer_to(bearing: float, gain: float = 2.0, turn_in_place: float = 0.6) -> tuple[float, float]:
-    """Drive toward a bearing (rad, robot frame): turn on the spot when it is far off."""
-    omega = float(np.clip(gain * bearing, -MAX_YAW_RATE, MAX_YAW_RATE))
-    v = 0.0 if abs(bearing) > turn_in_place else MAX_SPEED * float(np.cos(bearing)) ** 2
+def policy_sensors(policy: object) -> tuple[str, ...]:
+    """The sensors a policy reads.
+
+    A policy declaring none gets ``state`` + ``scan`` (+ ``pedestrians`` when it sets the older
+    ``privileged = True``).
+    """
+    declared = getattr(policy, "sensors", None)
+    if declared:
+        return tuple(declared)
+    return (*DEFAULT_SENSORS, "pedestrians") if getattr(policy, "privileged", False) else DEFAULT_SENSORS
+
+
+def steer_to(bearing: float, robot: RobotConfig, gain: float = 2.0, turn_in_place: float = 0.6) -> tuple[float, float]:
+    """Drive toward a bearing (rad, robot frame) within the robot's limits: turn on the spot when it is far off."""
+    max_w = float(np.deg2rad(robot.max_yaw_rate_deg_s))
+    omega = float(np.clip(gain * bearing, -max_w, max_w))
+    v = 0.0 if abs(bearing) > turn_in_place else robot.max_speed_mps * float(np.cos(bearing)) ** 2
     return v, omega
 
 
 class StraightPolicy:
     """Turn toward the goal and drive."""
 
-    privileged = False
+    sensors = ("state",)
 
     def reset(self, episode: Episode) -> None:
-        pass
+        """Remember the robot's limits."""
+        self.robot = episode.params.robot
 
-    def act(self, observation: Observation) -> tuple[float, float]:
-        return steer_to(float(observation.goal_polar[1]))
+    def act(self, observation: dict[str, Any]) -> tuple[float, float]:
+        """Steer at the goal's bearing."""
+        return steer_to(float(observation["state"]["goal_polar"][1]), self.robot)
 
 
 class PathFollower:
@@ -68,6 +94,7 @@ class PathFollower:
         self.progress = 0.0
 
     def point_at(self, s: float) -> np.ndarray:
+        """The point at arc length ``s`` (clamped to the path)."""
         s = float(np.clip(s, 0.0, self.arc[-1]))
         return np.array([np.interp(s, self.arc, self.path[:, 0]), np.interp(s, self.arc, self.path[:, 1])])
 
@@ -83,22 +110,35 @@ class PathFollower:
         return self.point_at(self.progress + self.lookahead)
 
 
-def bearing_to(observation: Observation, point: np.ndarray) -> float:
-    rel = point - observation.pose.xy
-    return float(wrap_angle(np.arctan2(rel[1], rel[0]) - observation.pose.yaw))
+def _pose(observation: dict[str, Any]) -> np.ndarray:
+    return np.asarray(observation["state"]["pose"], dtype=np.float64)
+
+
+def bearing_to(pose: np.ndarray, point: np.ndarray) -> float:
+    """Bearing (rad, robot frame) of a world point from a pose (x, y, yaw)."""
+    rel = point - pose[:2]
+    return float(wrap_angle(np.arctan2(rel[1], rel[0]) - pose[2]))
+
+
+def _guidance(episode: Episode, lookahead: float) -> PathFollower:
+    path = episode.path if len(episode.path) >= 2 else np.vstack([episode.start_xy, episode.goal_xy])
+    return PathFollower(np.vstack([path, episode.goal_xy]), lookahead=lookahead)
 
 
 class AStarPolicy:
     """Follow the episode's smoothed A* path (blind to people)."""
 
-    privileged = False
+    sensors = ("state",)
 
     def reset(self, episode: Episode) -> None:
-        path = episode.path if len(episode.path) >= 2 else np.vstack([episode.start_xy, episode.goal_xy])
-        self.follower = PathFollower(np.vstack([path, episode.goal_xy]), lookahead=0.35)
+        """Start following the episode's path."""
+        self.robot = episode.params.robot
+        self.follower = _guidance(episode, lookahead=0.35)
 
-    def act(self, observation: Observation) -> tuple[float, float]:
-        return steer_to(bearing_to(observation, self.follower.target(observation.pose.xy)), turn_in_place=0.4)
+    def act(self, observation: dict[str, Any]) -> tuple[float, float]:
+        """Pure pursuit of the path."""
+        pose = _pose(observation)
+        return steer_to(bearing_to(pose, self.follower.target(pose[:2])), self.robot, turn_in_place=0.4)
 
 
 class SocialPolicy:
@@ -109,18 +149,22 @@ class SocialPolicy:
     closer than the safety distances, and picks the one that best approaches the pure-pursuit target.
     """
 
-    privileged = True
+    sensors = ("state", "pedestrians")
 
     def __init__(self, horizon: float = 2.0, dt: float = 0.1, safety: float = 0.12) -> None:
         self.horizon, self.dt, self.safety = horizon, dt, safety
-        v = np.linspace(0.0, MAX_SPEED, 6)
-        w = np.linspace(-MAX_YAW_RATE, MAX_YAW_RATE, 11)
-        self.commands = np.array([(a, b) for a in v for b in w])
 
     def reset(self, episode: Episode) -> None:
+        """Build the command grid for the robot's limits and the clearance field of the map."""
+        params = episode.params
+        self.robot_radius = params.robot.radius_m
+        self.body_radius = params.pedestrian_radius_m
+        max_w = float(np.deg2rad(params.robot.max_yaw_rate_deg_s))
+        v = np.linspace(0.0, params.robot.max_speed_mps, 6)
+        w = np.linspace(-max_w, max_w, 11)
+        self.commands = np.array([(a, b) for a in v for b in w])
         self.world = StaticWorld(episode.static_map)
-        path = episode.path if len(episode.path) >= 2 else np.vstack([episode.start_xy, episode.goal_xy])
-        self.follower = PathFollower(np.vstack([path, episode.goal_xy]), lookahead=1.0)
+        self.follower = _guidance(episode, lookahead=1.0)
 
     def _rollouts(self, x: float, y: float, yaw: float) -> np.ndarray:
         steps = int(round(self.horizon / self.dt))
@@ -132,22 +176,24 @@ class SocialPolicy:
         ys = np.where(np.abs(w) < 1e-9, y + v * k * np.sin(yaw), y - v / safe_w * (np.cos(heading) - np.cos(yaw)))
         return np.stack([xs, ys], axis=-1)  # (C, K, 2)
 
-    def act(self, observation: Observation) -> tuple[float, float]:
-        pose = observation.pose
-        target = self.follower.target(pose.xy)
-        traj = self._rollouts(pose.x, pose.y, pose.yaw)
+    def act(self, observation: dict[str, Any]) -> tuple[float, float]:
+        """The safe rollout command that best approaches the pure-pursuit target."""
+        pose = _pose(observation)
+        target = self.follower.target(pose[:2])
+        traj = self._rollouts(*pose)
         clearance = self.world.clearance_at(traj).min(axis=1)
-        wall_ok = clearance > 0.2 + 0.03
+        wall_ok = clearance > self.robot_radius + WALL_MARGIN_M
         cost = np.linalg.norm(traj[:, -1] - target, axis=1) + 0.3 * np.linalg.norm(traj[:, 3] - target, axis=1)
-        if observation.pedestrians is not None and len(observation.pedestrians):
-            peds = observation.pedestrians
+        table = np.asarray(observation["pedestrians"], dtype=np.float64)
+        peds = table[table[:, 4] > 0.5, :4]
+        if len(peds):
             k = np.arange(1, traj.shape[1] + 1) * self.dt
             future = peds[None, :, :2] + k[:, None, None] * peds[None, :, 2:]  # (K, P, 2)
             gaps = np.linalg.norm(traj[:, :, None, :] - future[None], axis=-1)  # (C, K, P)
             # near-term predictions matter most; distant ones are discounted
             weights = np.exp(-k / 1.5)[None, :, None]
             closest = gaps.min(axis=(1, 2))
-            people_ok = closest > 0.2 + BODY_RADIUS_M + self.safety
+            people_ok = closest > self.robot_radius + self.body_radius + self.safety
             cost = cost + PROXIMITY_WEIGHT * (weights * np.clip(PROXIMITY_M - gaps, 0.0, None)).sum(axis=(1, 2))
         else:
             closest = np.full(len(traj), np.inf)
@@ -175,6 +221,6 @@ def load_policy(name: str) -> Policy:
         policy = getattr(importlib.import_module(module_name), attr)()
     except (ImportError, AttributeError) as exc:
         raise SongError(f"cannot load policy '{name}': {exc}") from exc
-    if not isinstance(policy, Policy):
-        raise SongError(f"policy '{name}' must define reset(episode), act(observation) and privileged")
+    if not (callable(getattr(policy, "reset", None)) and callable(getattr(policy, "act", None))):
+        raise SongError(f"policy '{name}' must define reset(episode) and act(observation)")
     return policy

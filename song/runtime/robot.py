@@ -17,6 +17,7 @@ class Pose:
 
     @property
     def xy(self) -> np.ndarray:
+        """(2,) position, m."""
         return np.array([self.x, self.y])
 
 

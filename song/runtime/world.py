@@ -63,7 +63,11 @@ def cast_circles(
     """Ranges along rays to the nearest of several discs (pedestrian bodies), ``max_range`` if none.
 
     Args:
-        origin: (2,) ray origin, m. angles: (n,) world angles, rad. centres: (P, 2) disc centres, m.
+        origin: (2,) ray origin, m.
+        angles: (n,) world angles, rad.
+        centres: (P, 2) disc centres, m.
+        radius: disc radius, m.
+        max_range: longest range returned, m.
     """
     ranges = np.full(len(angles), max_range)
     if len(centres) == 0:

@@ -10,7 +10,6 @@ import pytest
 from typer.testing import CliRunner
 
 from song.cli import app
-from song.config import RobotConfig
 from song.datasets.bench import open_benchmark
 from song.runtime.evaluate import iter_eval, summarize
 from tests.conftest import SAMPLES
@@ -58,10 +57,7 @@ def test_grading_means_something(tmp_path: Path) -> None:
     assert all(r.status == "ok" and r.stages.get("binding") == "ok" for r in results), [r.error for r in results]
     release = open_benchmark(_graded_release(run, tmp_path, 120))
     assert all(a.cache_path is not None for ep in itertools.islice(release.episodes(), 5) for a in ep.avatars)
-    rows = {
-        name: summarize(list(iter_eval(release, name, RobotConfig(), workers=2)))
-        for name in ("straight", "astar", "social")
-    }
+    rows = {name: summarize(list(iter_eval(release, name, workers=2))) for name in ("straight", "astar", "social")}
     assert rows["social"]["easy"]["SR"] >= 90.0
     assert rows["social"]["easy"]["SR"] > rows["straight"]["easy"]["SR"]
     for name, row in rows.items():

@@ -1,4 +1,4 @@
-"""A* on grids against networkx (same graph, identical lengths), path validity, statuses, fallback."""
+"""A* on grids against networkx (same graph, identical lengths), path validity, statuses, scipy Dijkstra."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from song.geometry import astar as astar_module
 from song.geometry.astar import SQRT2, astar
 
 
@@ -71,12 +70,14 @@ def test_statuses_limit_and_blocked_ends() -> None:
     assert astar(free, (3, 3), (3, 3))[0] == 0.0
 
 
-def test_scipy_fallback_gives_the_same_lengths(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_lengths_equal_scipy_dijkstra_over_the_same_graph() -> None:
+    from song.geometry.gridpath import distances_from, grid_graph
+
     rng = np.random.default_rng(3)
     free = rng.random((25, 25)) > 0.25
     cells = np.argwhere(free)
     pairs = [(tuple(cells[i]), tuple(cells[j])) for i, j in rng.integers(len(cells), size=(6, 2))]
     compiled = [astar(free, a, b)[0] for a, b in pairs]
-    monkeypatch.setattr(astar_module, "_kernel", None)
-    fallback = [astar(free, a, b)[0] for a, b in pairs]
-    np.testing.assert_allclose(fallback, compiled)
+    graph = grid_graph(free)
+    dijkstra = [distances_from(graph, a)[graph.index[b]] for a, b in pairs]
+    np.testing.assert_allclose(dijkstra, compiled)

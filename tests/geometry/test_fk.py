@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from song.geometry._fk_reference import fk_reference
 from song.geometry.fk import forward_kinematics, global_to_local, skinning_transforms
 from song.geometry.rotations import quat_identity, quat_normalize, quat_to_matrix
 from song.geometry.skeleton import N_JOINTS, PARENTS, rest_joints
-from song.pipeline.motion._reference import fk_reference
 
 RNG = np.random.default_rng(3)
 

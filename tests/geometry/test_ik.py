@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from song.geometry._ik_reference import two_bone_ik_reference
 from song.geometry.ik import two_bone_ik
-from song.pipeline.motion._reference import two_bone_ik_reference
 
 RNG = np.random.default_rng(11)
 

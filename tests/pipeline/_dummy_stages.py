@@ -27,5 +27,5 @@ def _second(ctx: StageContext) -> list[str]:
     return ["second.npz"]
 
 
-register_stage(Stage(name="dummy_first", run=_first, depends=(), config_section="scenes"))
-register_stage(Stage(name="dummy_second", run=_second, depends=("dummy_first",), config_section=""))
+register_stage(Stage(name="dummy_first", run=_first, depends=(), reads=("scenes",)))
+register_stage(Stage(name="dummy_second", run=_second, depends=("dummy_first",)))

@@ -127,3 +127,46 @@ def test_real_stages_identical_across_executors(tmp_path: Path, monkeypatch: pyt
         trees.append(_tree(run))
     assert trees[0] == trees[1] == trees[2]
     assert any(name.endswith("crowd.parquet") for name in trees[0])
+
+
+def test_changing_a_value_a_stage_reads_reruns_it(make_scene, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """intents reads crowd.agent_radius_m: changing it re-runs intents and crowd; a motion value re-runs neither."""
+    monkeypatch.delenv("SONG_STAGE_PLUGINS")
+    make_scene("a")
+    scenes, run = tmp_path / "scenes", tmp_path / "run"
+    base = SongConfig(seed=1)
+    first = {r.scene_id: r for r in iter_run(scenes, run, base, ["intents", "crowd"], executor="serial")}
+    assert first["a"].stages == {"intents": "ok", "crowd": "ok"}
+    record = json.loads((run / "scenes/a/stages.json").read_text())
+    other_motion = base.model_copy(update={"motion": base.motion.model_copy(update={"smoothing_sigma_frames": 2.0})})
+    same = {r.scene_id: r for r in iter_run(scenes, run, other_motion, ["intents", "crowd"], executor="serial")}
+    assert same["a"].stages == {"intents": "skipped", "crowd": "skipped"}
+    wider = base.model_copy(update={"crowd": base.crowd.model_copy(update={"agent_radius_m": 0.3})})
+    again = {r.scene_id: r for r in iter_run(scenes, run, wider, ["intents", "crowd"], executor="serial")}
+    assert again["a"].stages == {"intents": "ok", "crowd": "ok"}
+    after = json.loads((run / "scenes/a/stages.json").read_text())
+    assert all(after[s]["input_hash"] != record[s]["input_hash"] for s in ("intents", "crowd"))
+
+
+def test_stage_order_follows_dependencies() -> None:
+    from song.errors import StageError
+    from song.pipeline.chain import Stage, load_stages, stage_order
+
+    def run(ctx):
+        return []
+
+    stages = [Stage("c", run, ("b",)), Stage("a", run), Stage("b", run, ("a",)), Stage("z", run)]
+    assert [s.name for s in stage_order(stages)] == ["a", "b", "c", "z"]
+    with pytest.raises(StageError, match="cycle"):
+        stage_order([Stage("x", run, ("y",)), Stage("y", run, ("x",))])
+    built_in = [s.name for s in load_stages() if not s.name.startswith("dummy")]
+    assert built_in == ["intents", "crowd", "motion", "binding"]
+
+
+def test_unknown_stage_name_is_refused(make_scene, tmp_path: Path) -> None:
+    from song.errors import StageError
+
+    make_scene("a")
+    with pytest.raises(StageError, match="unknown stage 'bogus'"):
+        list(iter_run(tmp_path / "scenes", tmp_path / "run", SongConfig(), ["bogus"]))
+    assert not (tmp_path / "run" / "run.json").exists()

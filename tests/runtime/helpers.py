@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from song.datasets.bench.types import Episode, PedestrianTrack, StaticMap
+from song.config import RobotConfig
+from song.datasets.bench.types import Episode, PedestrianTrack, RuntimeParams, StaticMap
 
 
 def room_map(width: float = 10.0, height: float = 6.0, res: float = 0.05, walls: list | None = None) -> StaticMap:
@@ -26,7 +27,9 @@ def track(ped_id: int, start, end, t0: float = 0.0, speed: float = 0.8, fps: int
     return PedestrianTrack(ped_id, t, xy, yaw)
 
 
-def episode(start=(1.0, 3.0), goal=(8.0, 3.0), yaw=0.0, peds=(), walls=None, path=None, t0=0.0) -> Episode:
+def episode(
+    start=(1.0, 3.0), goal=(8.0, 3.0), yaw=0.0, peds=(), walls=None, path=None, t0=0.0, robot: RobotConfig | None = None
+) -> Episode:
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     path = np.asarray(path if path is not None else [start, goal], float)
     length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
@@ -46,4 +49,5 @@ def episode(start=(1.0, 3.0), goal=(8.0, 3.0), yaw=0.0, peds=(), walls=None, pat
         path=path,
         static_map=room_map(walls=walls),
         pedestrians=list(peds),
+        params=RuntimeParams(robot=robot or RobotConfig()),
     )

@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 
-from song.config import RobotConfig
 from song.datasets.bench.types import AvatarBinding, PedestrianTrack
 from song.pipeline.motion import read_trajectories
 from song.runtime.avatars import count_inside_volume, gaussian_poser, make_collider
@@ -27,7 +26,7 @@ def test_collider_poses_the_bound_avatars(make_scene, tmp_path: Path, pool) -> N
     ep = replace(episode(peds=tracks), avatars=avatars)
     pose = gaussian_poser(ep)
     assert pose is not None
-    assert make_collider(ep, RobotConfig()).pose is not None
+    assert make_collider(ep).pose is not None
     for index, track in enumerate(tracks):
         for f in (0, len(track.t) // 2, len(track.t) - 1):
             points = pose(index, float(track.t[f]))

@@ -11,7 +11,6 @@ import pytest
 from typer.testing import CliRunner
 
 from song.cli import app
-from song.config import RobotConfig
 from song.datasets.bench import open_benchmark
 from song.runtime.evaluate import iter_eval, summarize
 
@@ -40,12 +39,78 @@ def test_check_env_and_contract() -> None:
     assert ENV_ID == "song/SongNav-v1" and ENV_ID in gym.registry
     a, _ = env.reset(seed=11)
     b, _ = env.reset(seed=11)
-    np.testing.assert_array_equal(a["goal"], b["goal"])
+    np.testing.assert_array_equal(a["state"]["goal"], b["state"]["goal"])
+
+
+@pytest.mark.parametrize("sensors", [("state",), ("scan",), ("pedestrians",), ("state", "scan", "pedestrians")])
+def test_every_sensor_matches_its_declared_space(sensors: tuple[str, ...]) -> None:
+    pytest.importorskip("gymnasium")
+    from gymnasium.utils.env_checker import check_env
+
+    from song.runtime.env import SongNavEnv
+    from song.runtime.sensors import space_contains
+
+    env = SongNavEnv(str(GOLDEN), sensors=sensors)
+    check_env(env, skip_render_check=True)
+    declared = env.sensors.space()
+    for episode_id in env.episode_ids:
+        obs, _ = env.reset(options={"episode_id": episode_id})
+        done = False
+        while not done:
+            assert set(obs) == set(sensors) and space_contains(declared, obs)
+            assert env.observation_space.contains(obs)
+            obs, _, terminated, truncated, _ = env.step(np.array([0.5, 0.3], dtype=np.float32))
+            done = terminated or truncated
+
+
+def test_policies_and_env_read_the_release_parameters(tmp_path: Path) -> None:
+    """A release recording another robot and body radius changes what the runtime uses (no hard-coded copies)."""
+    import json
+    import shutil
+
+    from song.runtime.env import SongNavEnv
+
+    copy = tmp_path / "1.0.0"
+    shutil.copytree(GOLDEN / "1.0.0", copy)
+    info = json.loads((copy / "meta/info.json").read_text())
+    info["robot"]["max_speed_mps"] = 0.3
+    info["pedestrian_radius_m"] = 0.4
+    (copy / "meta/info.json").write_text(json.dumps(info))
+    bench = open_benchmark(copy)
+    assert bench.params.robot.max_speed_mps == 0.3 and bench.params.pedestrian_radius_m == 0.4
+    env = SongNavEnv(str(copy))
+    assert env.action_space.high[0] == pytest.approx(0.3)
+    result = next(iter_eval(bench, "straight"))
+    steps = np.linalg.norm(np.diff(result.trajectory[:, :2], axis=0), axis=1)
+    assert steps.max() <= 0.3 * 0.1 + 1e-9
+
+
+def test_eval_override_needs_the_flag_and_is_recorded(tmp_path: Path) -> None:
+    config = tmp_path / "faster.toml"
+    config.write_text("[robot]\nmax_speed_mps = 0.8\n")
+    out = tmp_path / "eval"
+    args = ["eval", "--bench", str(GOLDEN), "--policy", "straight", "--out", str(out), "-c", str(config)]
+    refused = CliRunner().invoke(app, args)
+    assert refused.exit_code == 2 and "--override" in refused.output and not out.exists()
+    same = tmp_path / "same.toml"
+    same.write_text("[robot]\nmax_speed_mps = 0.5\n")  # the release's own value is no override
+    assert CliRunner().invoke(app, [*args[:-1], str(same)]).exit_code == 0
+    accepted = CliRunner().invoke(app, [*args, "--override"])
+    assert accepted.exit_code == 0, accepted.output
+    assert "override robot.max_speed_mps: 0.5 → 0.8" in accepted.output
+    summary = json.loads((out / "straight.json").read_text())
+    bench = open_benchmark(GOLDEN)
+    assert summary["official"] is False
+    assert summary["overrides"] == {"robot.max_speed_mps": [0.5, 0.8]}
+    assert summary["release"]["fingerprint"] == bench.info.fingerprint
+    assert summary["params"]["robot"]["max_speed_mps"] == 0.8 and summary["sensors"][0]["name"] == "state"
+    meta = json.loads(pq.read_schema(out / "straight.parquet").metadata[b"song.eval"])
+    assert meta["overrides"] == summary["overrides"] and meta["release"]["version"] == bench.version
 
 
 def test_eval_outcomes_and_cli(tmp_path: Path) -> None:
     bench = open_benchmark(GOLDEN)
-    results = list(iter_eval(bench, "astar", RobotConfig()))
+    results = list(iter_eval(bench, "astar"))
     assert len(results) == len(bench)
     row = summarize(results)["all"]
     assert row["SR"] + row["CR_obs"] + row["CR_hum"] + row["TO"] == pytest.approx(100.0)
@@ -58,6 +123,7 @@ def test_eval_outcomes_and_cli(tmp_path: Path) -> None:
     assert table.num_rows == len(bench) and table.column("episode_id").to_pylist() == sorted(bench.episode_ids())
     summary = json.loads((out / "astar.json").read_text())
     assert summary["metrics"]["all"]["n"] == len(bench)
+    assert summary["official"] is True and summary["release"]["fingerprint"] == bench.info.fingerprint
     assert "| astar | all |" in (out / "results.md").read_text()
     again = tmp_path / "again"
     CliRunner().invoke(app, ["eval", "--bench", str(GOLDEN), "--policy", "astar", "--out", str(again), "-j", "2"])

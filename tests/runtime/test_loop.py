@@ -59,9 +59,10 @@ def test_wall_contact_restores_pose_counts_and_fails_after_five() -> None:
 
 
 def test_stuck_robot_is_reoriented_toward_open_space() -> None:
-    ep = episode(start=(1.71, 3.0), goal=(8.0, 3.0), walls=[(2.0, 0.0, 2.2, 6.0)])
-    cfg = RobotConfig(max_obstacle_collisions=50)
-    runner = EpisodeRunner(ep, _collider(ep), cfg)
+    ep = episode(
+        start=(1.71, 3.0), goal=(8.0, 3.0), walls=[(2.0, 0.0, 2.2, 6.0)], robot=RobotConfig(max_obstacle_collisions=50)
+    )
+    runner = EpisodeRunner(ep, _collider(ep))
     for _ in range(12):
         runner.step(0.5, 0.0)
     assert runner.c_obs >= 10
@@ -75,8 +76,9 @@ def test_success_and_timeout_and_single_outcome() -> None:
     assert result.outcome == "success"
     assert np.linalg.norm(result.trajectory[-1, :2] - ep.goal_xy) < 1.0
     assert result.metrics.length == pytest.approx(2.0, abs=0.06)
-    far = episode(start=(1.0, 1.0), goal=(9.0, 5.0), walls=[(3.0, 0.0, 3.2, 5.0)])
-    blocked = run_episode(far, StraightPolicy(), _collider(far), RobotConfig(max_steps=30, max_obstacle_collisions=99))
+    robot = RobotConfig(max_steps=30, max_obstacle_collisions=99)
+    far = episode(start=(1.0, 1.0), goal=(9.0, 5.0), walls=[(3.0, 0.0, 3.2, 5.0)], robot=robot)
+    blocked = run_episode(far, StraightPolicy(), _collider(far))
     assert blocked.outcome == "timeout" and blocked.steps == 30
 
 

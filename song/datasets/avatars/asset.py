@@ -62,6 +62,7 @@ class AvatarAsset:
 
     @property
     def height_m(self) -> float:
+        """Body height of the rest pose, m."""
         return float(self.meta["height_m"])
 
     def __len__(self) -> int:

@@ -108,7 +108,8 @@ def import_ply_avatar(
         path: the PLY (standard or SuperSplat compressed).
         avatar_id: id of the new identity.
         height_m: body height to scale to, metres.
-        up, forward: source axes such as ``"+y"``, ``"+z"`` (detected when omitted).
+        up: the source's up axis such as ``"+y"`` (detected when omitted).
+        forward: the source's forward axis such as ``"+z"`` (detected when omitted).
         source: provenance text stored in the metadata.
 
     Raises:

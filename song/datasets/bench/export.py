@@ -7,7 +7,6 @@ end, so an interrupted export leaves no half version visible; an existing versio
 from __future__ import annotations
 
 import datetime as dt
-import json
 import os
 import shutil
 import subprocess
@@ -37,11 +36,11 @@ from song.datasets.bench.schema import (
     SCENES,
     SCENES_PATH,
 )
+from song.datasets.run import RunFolder, RunInfo, read_bindings, read_crowd_table, read_intents, read_run_info
+from song.datasets.run.layout import AMASS_FILE, MOTION_META_FILE
 from song.datasets.scenes.package import GAUSSIANS, SEMANTIC_MAP, USD_PROXY, load_scene_package
-from song.errors import BenchmarkError
-from song.util import sha256_bytes, sha256_file, write_json_atomic
-
-GRADING_MANIFEST = "manifest/episodes.parquet"
+from song.errors import BenchmarkError, SongError
+from song.util import read_json_object, sha256_bytes, sha256_file, write_json_atomic
 
 
 @dataclass(frozen=True)
@@ -61,18 +60,17 @@ def yaw_to_quat_xyzw(yaw: np.ndarray) -> np.ndarray:
     return np.stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2), np.cos(yaw / 2)], axis=-1)
 
 
-def _run_inputs(run_dir: Path) -> tuple[dict[str, Any], Path]:
+def _run_inputs(run: RunFolder) -> RunInfo:
     try:
-        run = json.loads((run_dir / "run.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise BenchmarkError(f"{run_dir / 'run.json'}: not a run folder: {exc}") from exc
-    return run, Path(run["scenes_dir"])
+        return read_run_info(run.root)
+    except SongError as exc:
+        raise BenchmarkError(str(exc)) from exc
 
 
-def _episode_table(run_dir: Path, config_sha: str, goal_radius: float) -> pa.Table:
-    path = run_dir / GRADING_MANIFEST
+def _episode_table(run: RunFolder, config_sha: str, goal_radius: float) -> pa.Table:
+    path = run.episodes_manifest
     if not path.is_file():
-        raise BenchmarkError(f"{path}: missing; run `song grade --run {run_dir}` first")
+        raise BenchmarkError(f"{path}: missing; run `song grade --run {run.root}` first")
     src = pq.read_table(path).to_pydict()
     n = len(src["episode_id"])
     start = np.column_stack([src["start_x"], src["start_y"], np.zeros(n)]) if n else np.zeros((0, 3))
@@ -109,52 +107,43 @@ def _episode_table(run_dir: Path, config_sha: str, goal_radius: float) -> pa.Tab
     return pa.table(columns).cast(EPISODES).sort_by("episode_id")
 
 
-def _pedestrian_table(run_dir: Path, scene_ids: list[str]) -> pa.Table:
+def _pedestrian_table(run: RunFolder, scene_ids: list[str]) -> pa.Table:
     parts = []
     for scene_id in scene_ids:
-        path = run_dir / "scenes" / scene_id / "crowd.parquet"
+        path = run.scene(scene_id).crowd
         if not path.is_file():
             raise BenchmarkError(f"{path}: missing; run `song synth` on this scene")
-        table = pq.read_table(path)
+        table = read_crowd_table(path)
         table = table.append_column("scene_id", pa.array([scene_id] * table.num_rows, pa.string()))
         parts.append(table.select(PEDESTRIANS.names).cast(PEDESTRIANS))
     table = pa.concat_tables(parts) if parts else PEDESTRIANS.empty_table()
     return table.sort_by([("scene_id", "ascending"), ("ped_id", "ascending"), ("frame", "ascending")])
 
 
-def _read_json(path: Path) -> dict[str, Any]:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}
-
-
 def _avatar_rows(
-    run_dir: Path, scene_id: str, ped_ids: list[int], blobs: BlobStore, amass: bool
+    run: RunFolder, scene_id: str, ped_ids: list[int], blobs: BlobStore, amass: bool
 ) -> list[dict[str, Any]]:
-    scene_dir = run_dir / "scenes" / scene_id
-    intents = {item["id"]: item for item in _read_json(scene_dir / "intents.json").get("intents", [])}
-    bindings = {
-        int(item["ped_id"]): item for item in _read_json(scene_dir / "binding" / "bindings.json").get("pedestrians", [])
-    }
+    scene = run.scene(scene_id)
+    intents = read_intents(scene.intents).by_id() if scene.intents.is_file() else {}
+    bindings = read_bindings(scene.bindings).by_ped() if scene.bindings.is_file() else {}
     rows = []
     for ped_id in ped_ids:
-        binding = bindings.get(ped_id, {})
-        amass_dir = scene_dir / "human_amass" / f"traj_{ped_id}"
-        meta = _read_json(amass_dir / "meta.json")
-        asset = binding.get("asset_path")
-        materialized = binding.get("materialized_file")
+        binding = bindings.get(ped_id)
+        traj = scene.traj_dir(ped_id)
+        height = binding.height_m if binding else read_json_object(traj / MOTION_META_FILE).get("height_m")
         rows.append(
             {
                 "scene_id": scene_id,
                 "ped_id": ped_id,
-                "avatar_id": binding.get("avatar_id", ""),
-                "activity": intents.get(ped_id, {}).get("activity", ""),
-                "height_m": binding.get("height_m", meta.get("height_m")),
-                "cache": blobs.add(scene_dir / binding["cache_file"]) if "cache_file" in binding else None,
-                "asset": blobs.add(Path(asset)) if asset else None,
-                "amass": blobs.add(amass_dir / "motion_amass.npz") if amass else None,
-                "materialized": blobs.add(scene_dir / materialized) if materialized else None,
+                "avatar_id": binding.avatar_id if binding else "",
+                "activity": intents[ped_id].activity if ped_id in intents else "",
+                "height_m": height,
+                "cache": blobs.add(scene.path(binding.cache_file)) if binding else None,
+                "asset": blobs.add(Path(binding.asset_path)) if binding else None,
+                "amass": blobs.add(traj / AMASS_FILE) if amass else None,
+                "materialized": blobs.add(scene.path(binding.materialized_file))
+                if binding and binding.materialized_file
+                else None,
             }
         )
     return rows
@@ -247,10 +236,11 @@ def export_bench(
         raise BenchmarkError(f"{target}: version {version} already exists; releases are immutable, pick a new version")
     if parent is not None and not (bench_dir / parent / INFO_PATH).is_file():
         raise BenchmarkError(f"{bench_dir / parent}: parent version {parent} does not exist")
-    run, scenes_dir = _run_inputs(run_dir)
-    config = run["config"]
-    robot = config["robot"]
-    episodes = _episode_table(run_dir, run["config_sha256"], float(robot["goal_radius_m"]))
+    run = RunFolder(run_dir)
+    run_info = _run_inputs(run)
+    config = run_info.config
+    robot = config.robot
+    episodes = _episode_table(run, run_info.config_sha256, robot.goal_radius_m)
     scene_ids = sorted(set(episodes.column("scene_id").to_pylist()))
     tmp = bench_dir / f".{version}.tmp-{os.getpid()}"
     if tmp.exists():
@@ -258,13 +248,13 @@ def export_bench(
     tmp.mkdir(parents=True)
     try:
         blobs = BlobStore(tmp)
-        pedestrians = _pedestrian_table(run_dir, scene_ids)
+        pedestrians = _pedestrian_table(run, scene_ids)
         avatar_rows, scene_rows = [], []
         for scene_id in scene_ids:
             mask = pc.equal(pedestrians.column("scene_id"), scene_id)
             ped_ids = sorted(set(pedestrians.filter(mask).column("ped_id").to_pylist()))
-            avatar_rows += _avatar_rows(run_dir, scene_id, ped_ids, blobs, amass)
-            scene_rows.append(_scene_row(scenes_dir, scene_id, blobs))
+            avatar_rows += _avatar_rows(run, scene_id, ped_ids, blobs, amass)
+            scene_rows.append(_scene_row(run_info.scenes_dir, scene_id, blobs))
         tables = {
             "episodes": (EPISODES_PATH.format(part=0), episodes, EPISODES),
             "pedestrians": (PEDESTRIANS_PATH.format(part=0), pedestrians, PEDESTRIANS),
@@ -292,15 +282,19 @@ def export_bench(
             parent=parent,
             notes=notes,
             created=_created(),
-            generator=Generator(version=song.__version__, git_commit=_git_commit(), config_sha256=run["config_sha256"]),
-            robot=robot,
-            camera=config["camera"],
+            generator=Generator(
+                version=song.__version__, git_commit=_git_commit(), config_sha256=run_info.config_sha256
+            ),
+            fps=config.crowd.fps,
+            robot=robot.model_dump(mode="json"),
+            camera=config.camera.model_dump(mode="json"),
             collision={
-                "radius_m": robot["radius_m"],
-                "height_m": robot["collision_height_m"],
-                "volume": robot["collision_volume"],
-                "eta_col": robot["eta_col"],
+                "radius_m": robot.radius_m,
+                "height_m": robot.collision_height_m,
+                "volume": robot.collision_volume,
+                "eta_col": robot.eta_col,
             },
+            pedestrian_radius_m=config.crowd.agent_radius_m,
             counts=counts,
             tables={
                 name: TableInfo(path=rel, rows=rows_by_path[rel], columns=list(schema.names))

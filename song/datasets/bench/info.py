@@ -9,13 +9,17 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from song.config import CameraConfig, RobotConfig
 from song.datasets.bench.schema import FORMAT_NAME, SCHEMA_VERSION, schema_major
+from song.datasets.bench.types import RuntimeParams
 from song.errors import BenchmarkError, SchemaVersionError
 
 SEMVER = re.compile(r"^(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)$")
 
 
 class Generator(BaseModel):
+    """What wrote a release: package, version, git commit, the run's config sha256."""
+
     model_config = ConfigDict(extra="forbid")
     package: str = "song"
     version: str
@@ -24,6 +28,8 @@ class Generator(BaseModel):
 
 
 class TableInfo(BaseModel):
+    """One table of a release: its path, row count and columns."""
+
     model_config = ConfigDict(extra="forbid")
     path: str
     rows: int
@@ -46,6 +52,9 @@ class Info(BaseModel):
     robot: dict[str, Any]
     camera: dict[str, Any]
     collision: dict[str, Any]
+    pedestrian_radius_m: float | None = Field(
+        None, description="pedestrian body radius, m (schema ≥ 1.1; releases of 1.0 used the default 0.25 m)"
+    )
     counts: dict[str, Any]
     tables: dict[str, TableInfo]
     fingerprint: str = Field(..., description="sha256 of the sorted manifest (every file but info.json)")
@@ -63,6 +72,20 @@ class Info(BaseModel):
         if value != FORMAT_NAME:
             raise ValueError(f"expected '{FORMAT_NAME}'")
         return value
+
+
+def runtime_params(info: Info, where: str | Path) -> RuntimeParams:
+    """The :class:`RuntimeParams` recorded in a release's info (config defaults fill fields it predates)."""
+    try:
+        robot = RobotConfig.model_validate(info.robot)
+        camera = CameraConfig.model_validate(info.camera)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        field = ".".join(str(p) for p in first["loc"])
+        raise BenchmarkError(f"{where}: {field}: {first['msg']}") from exc
+    defaults = RuntimeParams()
+    radius = info.pedestrian_radius_m if info.pedestrian_radius_m is not None else defaults.pedestrian_radius_m
+    return RuntimeParams(robot=robot, camera=camera, pedestrian_radius_m=float(radius), fps=int(info.fps))
 
 
 def check_schema_version(found: str, where: str | Path) -> None:

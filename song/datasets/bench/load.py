@@ -5,6 +5,7 @@ Reads only the release's own files; never imports ``song.pipeline``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
@@ -13,7 +14,7 @@ import numpy as np
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from song.datasets.bench.info import Info, check_schema_version, read_info
+from song.datasets.bench.info import Info, check_schema_version, read_info, runtime_params
 from song.datasets.bench.release import resolve_version
 from song.datasets.bench.schema import (
     AVATARS_PATH,
@@ -23,7 +24,7 @@ from song.datasets.bench.schema import (
     PEDESTRIANS_PATH,
     SCENES_PATH,
 )
-from song.datasets.bench.types import AvatarBinding, Episode, PedestrianTrack, StaticMap
+from song.datasets.bench.types import AvatarBinding, Episode, PedestrianTrack, RuntimeParams, StaticMap
 from song.errors import BenchmarkError
 
 
@@ -33,6 +34,7 @@ class Benchmark:
     def __init__(self, root: Path) -> None:
         self.root = root
         self.info: Info = read_info(root / INFO_PATH)
+        self.params: RuntimeParams = runtime_params(self.info, root / INFO_PATH)
         self.episodes_table = self._read(EPISODES_PATH.format(part=0))
         self.scenes_table = self._read(SCENES_PATH)
         self.pedestrians_table = self._read(PEDESTRIANS_PATH.format(part=0))
@@ -43,7 +45,17 @@ class Benchmark:
 
     @property
     def version(self) -> str:
+        """The release's dataset version."""
         return self.info.dataset_version
+
+    @functools.cached_property
+    def max_pedestrians(self) -> int:
+        """The largest number of pedestrians in one scene of the release."""
+        table = self.pedestrians_table.select(["scene_id", "ped_id"])
+        if table.num_rows == 0:
+            return 0
+        counts = table.group_by("scene_id").aggregate([("ped_id", "count_distinct")])
+        return int(max(counts.column("ped_id_count_distinct").to_pylist()))
 
     def _read(self, rel: str):
         path = self.root / rel
@@ -94,6 +106,7 @@ class Benchmark:
         return self.episodes_table.num_rows
 
     def episode_ids(self) -> list[str]:
+        """Every episode id, in table order."""
         return self.episodes_table.column("episode_id").to_pylist()
 
     def episodes(self, difficulty: str | None = None, scene: str | None = None) -> Iterator[Episode]:
@@ -135,6 +148,7 @@ class Benchmark:
             pedestrians=list(self.pedestrians(scene_id)),
             avatars=self._avatars(scene_id),
             factors=factors,
+            params=self.params,
         )
 
 

@@ -47,6 +47,7 @@ class VerifyReport:
 
     @property
     def ok(self) -> bool:
+        """True when nothing is missing, extra or altered and the fingerprint matches."""
         return self.fingerprint_ok and not (self.missing or self.extra or self.altered)
 
 

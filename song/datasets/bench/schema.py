@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import pyarrow as pa
 
-SCHEMA_VERSION = "1.0.0"
+from song.datasets.run.crowd import CROWD_COLUMNS
+
+SCHEMA_VERSION = "1.1.0"  # 1.1: info.json records the pedestrian body radius
 FORMAT_NAME = "song.bench"
 PARQUET_COMPRESSION = "zstd"
 PARQUET_COMPRESSION_LEVEL = 9
@@ -69,18 +71,7 @@ EPISODES = pa.schema(
     ]
 )
 
-PEDESTRIANS = pa.schema(
-    [
-        ("scene_id", pa.string()),
-        ("ped_id", pa.int32()),
-        ("frame", pa.int32()),
-        ("t", pa.float64()),
-        ("x", pa.float64()),
-        ("y", pa.float64()),
-        ("yaw", pa.float64()),
-        ("speed", pa.float64()),
-    ]
-)
+PEDESTRIANS = pa.schema([("scene_id", pa.string()), *CROWD_COLUMNS])  # the run's crowd table + its scene
 
 AVATARS = pa.schema(
     [

@@ -15,6 +15,37 @@ from pathlib import Path
 
 import numpy as np
 
+from song.config import CameraConfig, CrowdConfig, RobotConfig
+
+
+@dataclass(frozen=True)
+class RuntimeParams:
+    """Everything the runtime needs, as recorded in the release's ``meta/info.json``.
+
+    The release is the single source of these values; ``song eval`` and the Gymnasium env read them
+    from the opened benchmark, and any override is explicit and recorded with the results.
+
+    Attributes:
+        robot: limits, control rate, collision settings, goal radius (DESIGN §8).
+        camera: the robot camera (height, FOV, near/far, resolution).
+        pedestrian_radius_m: pedestrian body radius (the crowd's agent radius), m.
+        fps: pedestrian trajectory rate, frames/s.
+    """
+
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    pedestrian_radius_m: float = field(default_factory=lambda: CrowdConfig().agent_radius_m)
+    fps: int = field(default_factory=lambda: CrowdConfig().fps)
+
+    def to_json(self) -> dict:
+        """A JSON-able dict (written into evaluation results)."""
+        return {
+            "robot": self.robot.model_dump(mode="json"),
+            "camera": self.camera.model_dump(mode="json"),
+            "pedestrian_radius_m": self.pedestrian_radius_m,
+            "fps": self.fps,
+        }
+
 
 @dataclass(frozen=True)
 class StaticMap:
@@ -90,6 +121,7 @@ class Episode:
         static_map: the occupancy map.
         pedestrians: the scene's pedestrian tracks.
         avatars: avatar bindings, one per pedestrian that has one.
+        params: the runtime parameters the episode is run with (the release's, unless overridden).
     """
 
     episode_id: str
@@ -109,6 +141,7 @@ class Episode:
     pedestrians: list[PedestrianTrack] = field(default_factory=list)
     avatars: list[AvatarBinding] = field(default_factory=list)
     factors: dict[str, float] = field(default_factory=dict)
+    params: RuntimeParams = field(default_factory=RuntimeParams)
 
 
 def pedestrian_states(tracks: list[PedestrianTrack], t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,18 +16,20 @@ from pathlib import Path
 
 import numpy as np
 
+from song.config import CrowdConfig
 from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
 from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, write_scene_package
 from song.datasets.scenes.ply import SH_C0, GaussianCloud, write_compressed_ply
 from song.datasets.scenes.raster import Rasterizer
 from song.datasets.scenes.usd import ProxyBox, write_usd_proxy
-from song.geometry.gridpath import clearance
+from song.geometry.freespace import components, erode
 from song.util import derive_rng
 
 RESOLUTION = 0.05
 OUTER_WALL_M = 0.15
 INNER_WALL_M = 0.1
 WALL_HEIGHT_M = 2.6
+BODY_RADIUS_M = CrowdConfig().agent_radius_m  # the generated layout must be one walkable part for a body this wide
 DOOR_CLEAR_M = 0.9  # objects keep this far from a doorway's centre line
 
 # (label, category, width m, depth m, height m)
@@ -143,7 +145,7 @@ class _Room:
 
 
 def _split(rng: np.random.Generator, x0: float, x1: float, n: int, min_w: float) -> list[float]:
-    """n + 1 cut positions between x0 and x1, every piece at least ``min_w`` wide."""
+    """N + 1 cut positions between x0 and x1, every piece at least ``min_w`` wide."""
     free = (x1 - x0) - n * min_w
     weights = rng.dirichlet(np.ones(n)) * free
     return list(np.round(x0 + np.concatenate([[0.0], np.cumsum(weights + min_w)]), 2))
@@ -355,10 +357,7 @@ def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) ->
         )
         cells = raster.cells
         free = cells == 255
-        legal = clearance(free, RESOLUTION) >= 0.25 + RESOLUTION / 2
-        from scipy import ndimage
-
-        labels, n_parts = ndimage.label(legal, structure=np.ones((3, 3)))
+        _, n_parts = components(erode(free, RESOLUTION, BODY_RADIUS_M))
         if n_parts == 1:
             break
     smap = SemanticMap(

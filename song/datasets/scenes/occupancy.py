@@ -9,7 +9,6 @@ import numpy as np
 
 from song.errors import SceneError
 from song.geometry.grid import cell_to_world, sample_mask, world_to_cell
-from song.util import write_bytes_atomic
 
 FREE = 255
 OCCUPIED = 0
@@ -32,6 +31,7 @@ class OccupancyGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
+        """(rows, cols) of the grid."""
         return self.cells.shape  # type: ignore[return-value]
 
     @property
@@ -85,8 +85,3 @@ def encode_occupancy_png(cells: np.ndarray) -> bytes:
     if not ok:
         raise RuntimeError("OpenCV failed to encode the occupancy PNG")
     return buffer.tobytes()
-
-
-def write_occupancy_png(path: str | Path, grid: OccupancyGrid) -> None:
-    """Atomically write ``grid.cells`` as an 8-bit PNG."""
-    write_bytes_atomic(path, encode_occupancy_png(grid.cells))

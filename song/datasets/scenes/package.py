@@ -43,15 +43,18 @@ class ScenePackage:
 
     @property
     def scene_id(self) -> str:
+        """The scene id from the semantic map."""
         return self.semantic_map.scene_id
 
     @property
     def gaussians_path(self) -> Path | None:
+        """The Gaussian PLY, or None when the package has none."""
         path = self.root / GAUSSIANS
         return path if path.is_file() else None
 
     @property
     def usd_path(self) -> Path | None:
+        """The USD proxy, or None when the package has none."""
         path = self.root / USD_PROXY
         return path if path.is_file() else None
 
@@ -150,8 +153,11 @@ def check_consistency(smap: SemanticMap, grid: OccupancyGrid, root: Path, min_fr
 
 
 def check_optional_files(root: Path) -> None:
-    """Cheap checks of the optional files: the PLY's header, schema and body size (no decoding),
-    the USD layer's text header and up axis (the full read is :func:`read_usd_proxy`)."""
+    """Cheap checks of the optional files.
+
+    The PLY's header, schema and body size (no decoding); the USD layer's text header and up axis (the
+    full read is :func:`read_usd_proxy`).
+    """
     from song.datasets.scenes.ply import check_gaussian_ply
 
     gaussians = root / GAUSSIANS

@@ -3,6 +3,6 @@
 from song.pipeline.binding.stage import bind_motion, run_binding, sample_identities
 from song.pipeline.chain import Stage, register_stage
 
-register_stage(Stage(name="binding", run=run_binding, depends=("motion",), config_section="binding"))
+register_stage(Stage(name="binding", run=run_binding, depends=("motion",), reads=("binding", "crowd.fps")))
 
 __all__ = ["bind_motion", "run_binding", "sample_identities"]

@@ -11,20 +11,17 @@ body height (the root alignment: ``diag(s, s, s, 1)``, recorded). Outputs under 
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from song.datasets.avatars.asset import AvatarAsset, load_avatar
 from song.datasets.avatars.cache import MotionCache, write_compact_cache, write_materialized_cache
+from song.datasets.run import BindingRecord, Bindings, SceneFolder, write_bindings
+from song.datasets.run.layout import BINDINGS_FILE, CACHE_FILE, MATERIALIZED_FILE
 from song.pipeline.binding.pool import ensure_pool
 from song.pipeline.chain import StageContext
-from song.pipeline.motion.io import AMASS_DIR, LoadedMotion, load_motion
-from song.util import write_json_atomic
-
-BINDING_DIR = "binding"
-BINDINGS_FILE = "bindings.json"
+from song.pipeline.motion.io import LoadedMotion, load_motion
 
 
 def sample_identities(n: int, pool_size: int, rng: np.random.Generator) -> list[int]:
@@ -35,9 +32,8 @@ def sample_identities(n: int, pool_size: int, rng: np.random.Generator) -> list[
     return order[:n]
 
 
-def _motions(scene_dir: Path) -> list[LoadedMotion]:
-    folders = sorted((scene_dir / AMASS_DIR).glob("traj_*"), key=lambda p: int(p.name.split("_")[1]))
-    return [load_motion(folder) for folder in folders if (folder / "motion.npz").exists()]
+def _motions(scene: SceneFolder) -> list[LoadedMotion]:
+    return [load_motion(folder) for folder in scene.motion_dirs()]
 
 
 def bind_motion(asset: AvatarAsset, motion: LoadedMotion, fps: float) -> tuple[AvatarAsset, MotionCache]:
@@ -71,8 +67,9 @@ def run_binding(ctx: StageContext) -> list[str]:
     """Stage entry: bind every pedestrian's motion to an avatar and write its caches."""
     cfg = ctx.config.binding
     pool = ensure_pool(cfg)
-    motions = _motions(ctx.scene_dir)
-    out_dir = ctx.scene_dir / BINDING_DIR
+    scene = SceneFolder(ctx.scene_dir)
+    motions = _motions(scene)
+    out_dir = scene.binding_dir
     if out_dir.exists():
         shutil.rmtree(out_dir)  # a rerun replaces the whole folder (no stale caches of removed pedestrians)
     out_dir.mkdir(parents=True)
@@ -83,25 +80,25 @@ def run_binding(ctx: StageContext) -> list[str]:
         asset = assets.setdefault(pick, load_avatar(pool[pick]))
         scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)))
         ped_id = cache.meta["ped_id"]
-        cache_file = f"{BINDING_DIR}/traj_{ped_id}.npz"
-        write_compact_cache(
-            ctx.scene_dir / cache_file, cache.root_pos, cache.local_quats, cache.rest_joints, cache.meta
-        )
-        entry = {
-            "ped_id": ped_id,
-            "avatar_id": asset.avatar_id,
-            "asset_path": str(pool[pick].resolve()),
-            "asset_sha256": asset.meta.get("sha256", ""),
-            "cache_file": cache_file,
-            "height_m": cache.meta["height_m"],
-            "scale": cache.meta["scale"],
-        }
+        cache_file = CACHE_FILE.format(ped_id=ped_id)
+        write_compact_cache(scene.path(cache_file), cache.root_pos, cache.local_quats, cache.rest_joints, cache.meta)
         written.append(cache_file)
+        materialized = None
         if cfg.materialize:
-            materialized = f"{BINDING_DIR}/traj_{ped_id}.materialized.npz"
-            write_materialized_cache(ctx.scene_dir / materialized, scaled, cache)
-            entry["materialized_file"] = materialized
+            materialized = MATERIALIZED_FILE.format(ped_id=ped_id)
+            write_materialized_cache(scene.path(materialized), scaled, cache)
             written.append(materialized)
-        entries.append(entry)
-    write_json_atomic(out_dir / BINDINGS_FILE, {"pedestrians": entries, "pool_size": len(pool)})
-    return [*written, f"{BINDING_DIR}/{BINDINGS_FILE}"]
+        entries.append(
+            BindingRecord(
+                ped_id=ped_id,
+                avatar_id=asset.avatar_id,
+                asset_path=str(pool[pick].resolve()),
+                asset_sha256=asset.meta.get("sha256", ""),
+                cache_file=cache_file,
+                materialized_file=materialized,
+                height_m=cache.meta["height_m"],
+                scale=cache.meta["scale"],
+            )
+        )
+    write_bindings(scene.bindings, Bindings(pedestrians=entries, pool_size=len(pool)))
+    return [*written, BINDINGS_FILE]

@@ -2,8 +2,8 @@
 
 from song.pipeline.chain import Stage, register_stage
 from song.pipeline.crowd.navmesh import load_navmesh
-from song.pipeline.crowd.stage import CrowdTracks, load_crowd, run_crowd
+from song.pipeline.crowd.stage import run_crowd
 
-register_stage(Stage(name="crowd", run=run_crowd, depends=("intents",), config_section="crowd"))
+register_stage(Stage(name="crowd", run=run_crowd, depends=("intents",), reads=("crowd",)))
 
-__all__ = ["CrowdTracks", "load_crowd", "load_navmesh", "run_crowd"]
+__all__ = ["load_navmesh", "run_crowd"]

@@ -7,8 +7,9 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    pushed out of sight of its corner gets a short detour back to it (a local replan);
 2. steering toward the next corner with Detour's smooth steer direction (the next-but-one corner pulls
    the heading early), slowing down within 2r of the goal;
-3. ORCA velocity selection among all pedestrians and the walls (the navmesh grown back by r + 5 mm,
-   i.e. the un-eroded free space, so a pedestrian on the mesh never overlaps a wall in ORCA's eyes);
+3. local avoidance among all pedestrians and the walls, through the avoidance seam
+   (:mod:`song.pipeline.crowd.avoidance`; ``crowd.avoidance = "orca"``: ORCA against the navmesh grown
+   back by r + 5 mm, i.e. the un-eroded free space, so a pedestrian on the mesh never overlaps a wall);
 4. acceleration clamp; moves constrained to the navmesh (sliding along its boundary); overlap
    resolution passes (pairs pushed apart within each pedestrian's speed budget, again on the mesh);
 5. stall detection: no progress along the path for ``stall_time_s`` → a full replan around everyone
@@ -29,10 +30,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from song.config import CrowdConfig
+from song.datasets.run.intents import Intent
 from song.geometry.navmesh import Navmesh, carve_discs
-from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, orca_step
-from song.pipeline.crowd.orca_kernel import HAVE_NUMBA, orca_step_compiled
-from song.pipeline.intents.model import Intent
+from song.pipeline.crowd.avoidance import LocalAvoidance
 
 ARRIVE_M = 0.05  # within this of the goal a pedestrian has arrived (it then stands there)
 CHECK_EVERY = 10  # frames between visibility checks (turn anticipation, off-corridor detection): 1/3 s
@@ -40,20 +40,19 @@ CORNER_REACHED_M = 0.1  # closer than this to a corner, head for the next one (D
 
 
 def _length(v: np.ndarray) -> np.ndarray:
-    """Length of 2-D vectors along the last axis (one ufunc call; np.linalg.norm costs ~3× more per call
-    and runs ~16 times per frame)."""
+    """Length of 2-D vectors along the last axis.
+
+    One ufunc call: ``np.linalg.norm`` costs ~3× more per call and runs ~16 times per frame.
+    """
     return np.hypot(v[..., 0], v[..., 1])
 
 
-# the compiled per-agent kernel when numba is there (same results within 1e-9, ~20x faster at these sizes)
-ORCA_STEP = orca_step_compiled if HAVE_NUMBA else orca_step
 YIELD_S, MAX_YIELDS = 3.0, 2  # a pedestrian still stalled after its replan stands aside this long, this often
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
 HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
 STAND_SPEED = 0.05  # m/s: below this the heading is held
 OVERLAP_PASSES = 3
 OVERLAP_MARGIN_M = 0.002  # overlap passes separate centres to 2r + this
-WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from the mesh
 MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
 
 
@@ -269,19 +268,19 @@ def _clamp_speed(w: _Walkers, mesh: Navmesh, target: np.ndarray, dt: float) -> n
     return target
 
 
-def _step_frame(w, mesh, obstacles, params, moving, cfg, frame):
+def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.ndarray, cfg: CrowdConfig, frame: int):
     dt, r = 1.0 / cfg.fps, cfg.agent_radius_m
     if not moving.any():
         w.vel = np.zeros_like(w.vel)
         return
     _update_corners(w, mesh, moving, frame % CHECK_EVERY == 0)
     pref = _preferred(w, moving, r, dt)
-    # ORCA for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
+    # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
     d = _length(w.pos[:, None] - w.pos[None, moving])
-    sub = np.flatnonzero(moving | (d < params.neighbor_dist).any(axis=1))
+    sub = np.flatnonzero(moving | (d < avoid.neighbor_dist).any(axis=1))
     new_vel = np.zeros_like(w.vel)
-    new_vel[sub] = ORCA_STEP(
-        w.pos[sub], w.vel[sub], pref[sub], np.full(len(sub), r), np.where(moving, w.speed, 0.0)[sub], obstacles, params
+    new_vel[sub] = avoid.velocities(
+        w.pos[sub], w.vel[sub], pref[sub], np.full(len(sub), r), np.where(moving, w.speed, 0.0)[sub]
     )
     dv = new_vel - w.vel
     limit = cfg.max_accel_mps2 * dt
@@ -344,18 +343,17 @@ def _replan_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarr
     return (path if path is not None else w.paths[k][w.corner[k] :]), reason
 
 
-def _simulate(intents, mesh, obstacles, cfg, rng):
+def _simulate(intents, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfig, rng):
     """One joint run. Returns ((xy, yaw, speed, arrived, arrival), {}) or (None, failures to remove)."""
     w, failures = _start(intents, mesh, cfg, rng)
     if failures:
         return None, failures
     fps = cfg.fps
-    params = OrcaParams(1.0 / fps, cfg.neighbor_dist_m, cfg.max_neighbors, cfg.time_horizon_s, cfg.time_horizon_obst_s)
     out_xy, out_yaw, out_speed = [w.pos.copy()], [w.heading.copy()], [np.zeros(len(w.pos))]
     for frame in range(1, int(cfg.max_duration_s * fps) + 1):
         t = frame / fps
         moving = (w.depart <= t) & ~w.arrived & (w.yield_until <= t)
-        _step_frame(w, mesh, obstacles, params, moving, cfg, frame)
+        _step_frame(w, mesh, avoid, moving, cfg, frame)
         failed = _check_progress(w, mesh, moving, t, cfg.stall_time_s, cfg.agent_radius_m)
         if failed:
             return None, failed
@@ -371,22 +369,23 @@ def _simulate(intents, mesh, obstacles, cfg, rng):
 
 
 def plan_crowd(
-    intents: list[Intent], mesh: Navmesh, obstacles: ObstacleSet | None, cfg: CrowdConfig, rng: np.random.Generator
+    intents: list[Intent], mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfig, rng: np.random.Generator
 ) -> CrowdPlan:
     """Simulate all pedestrians jointly; those that cannot be planned are removed with a reason.
 
     Args:
         intents: the scene's pedestrians (start, goal, speed, departure).
         mesh: the navmesh of legal centres at ``cfg.agent_radius_m``.
-        obstacles: ORCA walls (see :func:`song.geometry.navmesh.obstacle_rings`), or None.
-        cfg: crowd parameters. rng: seeded generator (start jitter).
+        avoid: the local-avoidance model (:func:`song.pipeline.crowd.avoidance.make_avoidance`).
+        cfg: crowd parameters.
+        rng: seeded generator (start jitter).
     """
     kept = list(intents)
     status: dict[int, dict] = {}
     state = rng.bit_generator.state
     while kept:
         rng.bit_generator.state = state  # every re-run draws the same jitter stream: results depend on who is kept only
-        result, failures = _simulate(kept, mesh, obstacles, cfg, rng)
+        result, failures = _simulate(kept, mesh, avoid, cfg, rng)
         if result is None:
             for k, reason in sorted(failures.items()):
                 status[kept[k].id] = {"status": "removed", "reason": reason, "arrival_s": None}

@@ -12,15 +12,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from song.config import GradingConfig, SongConfig
+from song.datasets.bench.schema import DIFFICULTIES, MODES
+from song.datasets.run import RunFolder, read_crowd, read_run_info
+from song.datasets.run.layout import CROWD_FILE
 from song.datasets.scenes import load_scene_package
-from song.pipeline.chain import read_run
-from song.pipeline.crowd.stage import load_crowd
-from song.pipeline.grading.sample import FPS, MODES, Crowd, EpisodeSampler, RobotMap, closest_pass
+from song.parallel import parallel_map
+from song.pipeline.grading.sample import Crowd, EpisodeSampler, RobotMap, closest_pass
 from song.util import derive_rng, write_bytes_atomic, write_json_atomic
 
-MANIFEST_DIR = "manifest"
-EPISODES_FILE = "episodes.parquet"
-SUMMARY_FILE = "summary.json"
 FACTORS = ("path_length", "n_turns", "n_encounters", "corridor_width")
 BINS = ("bin_length", "bin_turns", "bin_encounters", "bin_width")
 
@@ -86,12 +85,12 @@ class GradingResult:
 def _scene_episodes(scene_id: str, scenes_dir: Path, run_dir: Path, config: SongConfig, quota: int):
     cfg = config.grading
     package = load_scene_package(scenes_dir / scene_id)
-    tracks = load_crowd(run_dir / "scenes" / scene_id)
+    tracks = read_crowd(RunFolder(run_dir).scene(scene_id).crowd)
     if len(tracks.ids) == 0:
         return [], {"*": "no pedestrians in this scene"}
     robot = RobotMap.build(package, cfg.robot_radius_m + cfg.path_margin_m)
-    crowd = Crowd(tracks.ids, tracks.xy)
-    sampler = EpisodeSampler(robot, crowd, cfg, duration=tracks.xy.shape[1] / FPS)
+    crowd = Crowd(tracks.ids, tracks.xy, tracks.fps)
+    sampler = EpisodeSampler(robot, crowd, cfg, duration=crowd.duration)
     rows, infeasible = [], {}
     for k in range(quota):
         rng = derive_rng(config.seed, scene_id, "grading", k)
@@ -144,17 +143,6 @@ def _scene_job(args: tuple[str, str, str, str, int]):
     return scene_id, *_scene_episodes(scene_id, Path(scenes_dir), Path(run_dir), config, quota)
 
 
-def _map_scenes(jobs: list[tuple], workers: int):
-    if workers <= 1 or len(jobs) <= 1:
-        yield from map(_scene_job, jobs)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        yield from pool.map(_scene_job, jobs, chunksize=max(1, len(jobs) // (8 * workers)))
-
-
 def grade_run(
     run_dir: str | Path, config: SongConfig | None = None, n_episodes: int | None = None, workers: int = 1
 ) -> GradingResult:
@@ -163,16 +151,16 @@ def grade_run(
     Scenes are sampled independently (seeds per scene and episode), optionally in ``workers``
     processes; the manifest does not depend on the worker count.
     """
-    run_dir = Path(run_dir)
-    scenes_dir, run_config = read_run(run_dir)
-    config = config or run_config
+    run = RunFolder(Path(run_dir))
+    run_info = read_run_info(run.root)
+    config = config or run_info.config
     cfg = config.grading
     total = n_episodes or cfg.n_episodes
-    scene_ids = sorted(p.name for p in (run_dir / "scenes").iterdir() if (p / "crowd.parquet").is_file())
+    scene_ids = run.scene_ids(having=CROWD_FILE)
     rows, infeasible = [], {}
     quotas = _quotas(scene_ids, total)
-    jobs = [(sid, str(scenes_dir), str(run_dir), config.model_dump_json(), quotas[sid]) for sid in scene_ids]
-    for scene_id, got, why in _map_scenes(jobs, workers):
+    jobs = [(sid, str(run_info.scenes_dir), str(run.root), config.model_dump_json(), quotas[sid]) for sid in scene_ids]
+    for scene_id, got, why in parallel_map(_scene_job, jobs, workers):
         rows += got
         if why:
             infeasible[scene_id] = why
@@ -189,18 +177,17 @@ def grade_run(
         row["score"], row["difficulty"] = int(s), str(d)
     table = pa.Table.from_pylist(rows) if rows else pa.table({"episode_id": pa.array([], pa.string())})
     summary = _summary(rows, infeasible, total)
-    out = run_dir / MANIFEST_DIR
     buffer = io.BytesIO()
     pq.write_table(table, buffer, compression="zstd", compression_level=9)
-    write_bytes_atomic(out / EPISODES_FILE, buffer.getvalue())
-    write_json_atomic(out / SUMMARY_FILE, summary)
+    write_bytes_atomic(run.episodes_manifest, buffer.getvalue())
+    write_json_atomic(run.grading_summary, summary)
     return GradingResult(table, summary)
 
 
 def _summary(rows: list[dict], infeasible: dict, requested: int) -> dict:
     counts: dict[str, dict[str, int]] = {}
     factors: dict[str, dict[str, dict[str, float]]] = {}
-    for difficulty in ("easy", "medium", "hard"):
+    for difficulty in DIFFICULTIES:
         subset = [r for r in rows if r["difficulty"] == difficulty]
         counts[difficulty] = {mode: sum(r["mode"] == mode for r in subset) for mode in MODES}
         factors[difficulty] = {

@@ -5,15 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from song.config import GradingConfig
 from song.datasets.scenes import ScenePackage
 from song.geometry.astar import astar
-from song.geometry.gridpath import clearance, polyline_length, shortcut
-
-MODES = ("co_directional", "counter_directional", "encounter", "random")
-FPS = 30
+from song.geometry.freespace import clearance_field, components
+from song.geometry.gridpath import polyline_length, shortcut
 
 
 @dataclass
@@ -30,9 +27,9 @@ class RobotMap:
     def build(cls, package: ScenePackage, radius: float) -> RobotMap:
         """Inflate by ``radius`` (the robot's radius plus the path's safety margin)."""
         grid = package.occupancy
-        room = clearance(grid.free, grid.resolution)
-        legal = room >= radius + 0.5 * grid.resolution
-        labels, _ = ndimage.label(legal, structure=np.ones((3, 3)))
+        room = clearance_field(grid.free, grid.resolution)
+        legal = room >= radius
+        labels, _ = components(legal)  # 4-connected, as the A* (no corner cutting) moves
         return cls(package, legal, room, grid.to_world(np.argwhere(legal)), labels)
 
     def connected(self, a: np.ndarray, b: np.ndarray) -> bool:
@@ -58,17 +55,24 @@ class RobotMap:
 
 @dataclass
 class Crowd:
-    """A scene's pedestrian trajectories: ids (P,), xy (P, F, 2) at 30 FPS from t = 0."""
+    """A scene's pedestrian trajectories: ids (P,), xy (P, F, 2) at ``fps`` from t = 0."""
 
     ids: np.ndarray
     xy: np.ndarray
+    fps: int
+
+    @property
+    def duration(self) -> float:
+        """Length of the scenario, s."""
+        return self.xy.shape[1] / self.fps
 
     def at(self, t: np.ndarray) -> np.ndarray:
         """(K, P, 2) positions at times t (K,), holding the first/last frame outside the scenario."""
-        frames = np.clip(np.round(np.asarray(t) * FPS).astype(np.int64), 0, self.xy.shape[1] - 1)
+        frames = np.clip(np.round(np.asarray(t) * self.fps).astype(np.int64), 0, self.xy.shape[1] - 1)
         return np.transpose(self.xy[:, frames], (1, 0, 2))
 
     def circle(self) -> tuple[np.ndarray, float]:
+        """Centre (2,) and radius (m) of the circle bounding every trajectory sample."""
         pts = self.xy.reshape(-1, 2)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         centre = 0.5 * (lo + hi)
@@ -87,12 +91,13 @@ def robot_positions(path: np.ndarray, speed: float, dt: float) -> np.ndarray:
 
 def closest_pass(path: np.ndarray, crowd: Crowd, t0: float, speed: float) -> np.ndarray:
     """Per pedestrian, the closest horizontal distance to the robot moving along ``path`` from ``t0``."""
-    robot = robot_positions(path, speed, 1.0 / FPS)
-    peds = crowd.at(t0 + np.arange(len(robot)) / FPS)
+    robot = robot_positions(path, speed, 1.0 / crowd.fps)
+    peds = crowd.at(t0 + np.arange(len(robot)) / crowd.fps)
     return np.linalg.norm(peds - robot[:, None, :], axis=-1).min(axis=0)
 
 
 def subtended_deg(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> float:
+    """Angle (deg) subtended at ``centre`` by points ``a`` and ``b`` (2,)."""
     u, v = a - centre, b - centre
     cos = float(u @ v / max(np.linalg.norm(u) * np.linalg.norm(v), 1e-12))
     return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))

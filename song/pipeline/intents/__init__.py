@@ -1,9 +1,16 @@
 """Intents stage (DESIGN §5.1): semantic pedestrian routines for a scene."""
 
 from song.pipeline.chain import Stage, register_stage
-from song.pipeline.intents.model import Intent, IntentSet, load_intents
 from song.pipeline.intents.stage import generate_intents, run_intents
 
-register_stage(Stage(name="intents", run=run_intents, depends=(), config_section="intents"))
+# the walkable grid follows the crowd's body radius and navmesh simplification (a kept goal must be reachable)
+register_stage(
+    Stage(
+        name="intents",
+        run=run_intents,
+        depends=(),
+        reads=("intents", "crowd.agent_radius_m", "crowd.contour_error_m"),
+    )
+)
 
-__all__ = ["Intent", "IntentSet", "generate_intents", "load_intents", "run_intents"]
+__all__ = ["generate_intents", "run_intents"]

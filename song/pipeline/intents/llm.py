@@ -50,10 +50,14 @@ def scrub(text: str) -> str:
 
 
 class LLMClient(Protocol):
+    """A provider client: one structured request at a time."""
+
     provider: str
     model: str
 
-    def request(self, prompt: str, schema: type[BaseModel]) -> str: ...
+    def request(self, prompt: str, schema: type[BaseModel]) -> str:
+        """Send one prompt asking for JSON that fits ``schema``; returns the raw reply text."""
+        ...
 
 
 class GeminiClient:
@@ -84,6 +88,7 @@ class GeminiClient:
             raise LLMError(scrub(f"gemini client: {exc}")) from exc
 
     def request(self, prompt: str, schema: type[BaseModel]) -> str:
+        """One structured Gemini call; returns the reply text (errors raise :class:`LLMError`)."""
         from google.genai import errors
 
         config = self._types.GenerateContentConfig(response_mime_type="application/json", response_schema=schema)
@@ -110,6 +115,7 @@ class OpenAICompatibleClient:
         self.timeout_s = timeout_s
 
     def request(self, prompt: str, schema: type[BaseModel]) -> str:
+        """One chat-completions call in JSON mode; returns the reply text (errors raise :class:`LLMError`)."""
         body = {
             "model": self.model,
             "messages": [{"role": "user", "content": prompt}],

@@ -5,20 +5,26 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 from shapely.geometry import Polygon
 
 from song.datasets.scenes import ScenePackage
-from song.geometry.gridpath import GridGraph, clearance, distances_from_many, grid_graph
+from song.geometry.freespace import clearance_field, largest_component, walkable_cells
+from song.geometry.grid import sample_mask
+from song.geometry.gridpath import GridGraph, distances_from_many, grid_graph
 
 SNAP_GAP_M = 0.15  # how far from an object's footprint a pedestrian stands (beyond its body radius)
 COARSE_M = 0.2  # geodesic estimates for intents use a grid this coarse (±0.2 m is plenty for 2–40 m bounds)
-STANDING_ROOM_M = 0.5  # extra clearance preferred around start/goal spots (a passer-by's body width)  # geodesic estimates for intents run on a grid of this cell size
+STANDING_ROOM_M = 0.5  # extra clearance preferred around start/goal spots (a passer-by's body width)
 
 
 @dataclass
 class Walkable:
-    """Legal pedestrian centres of a scene (free space eroded by the body radius), main component only."""
+    """Legal pedestrian centres of a scene as the crowd's navmesh sees them, main component only.
+
+    ``legal`` is :func:`song.geometry.freespace.walkable_cells` (free space eroded by the body radius,
+    strips narrower than the navmesh keeps removed), so a goal the intents stage keeps is one the crowd
+    can reach.
+    """
 
     legal: np.ndarray  # (rows, cols) bool on the scene grid
     main: np.ndarray  # (rows, cols) bool: the largest connected part of ``legal``
@@ -30,26 +36,18 @@ class Walkable:
 
     @property
     def area_m2(self) -> float:
+        """Area of the main walkable component, m²."""
         return float(self.main.sum()) * self.package.occupancy.resolution**2
 
     def on_main(self, xy: np.ndarray) -> np.ndarray:
-        rc = self.package.occupancy.to_cell(xy)
-        rows, cols = self.main.shape
-        ok = (rc[..., 0] >= 0) & (rc[..., 0] < rows) & (rc[..., 1] >= 0) & (rc[..., 1] < cols)
-        out = np.zeros(rc.shape[:-1], dtype=bool)
-        out[ok] = self.main[rc[..., 0][ok], rc[..., 1][ok]]
-        return out
+        """(...,) bool: points (..., 2) whose cell is on the main walkable component."""
+        return sample_mask(self.main, self.package.occupancy.to_cell(xy))
 
     def _coarse_cell(self, point: np.ndarray) -> np.ndarray:
         rc = self.package.occupancy.to_cell(point) // self.coarse_factor
         if self.coarse.index[tuple(rc)] < 0:
             rc = self.coarse.cells[np.argmin(np.abs(self.coarse.cells - rc).sum(axis=1))]
         return rc
-
-    def geodesic_from(self, start: np.ndarray) -> tuple[np.ndarray, float]:
-        """Coarse geodesic distances (m) from ``start`` to every coarse node; and the metres per cell."""
-        rows, res = self.geodesics_from(np.asarray(start)[None])
-        return rows[0], res
 
     def geodesics_from(self, starts: np.ndarray) -> tuple[np.ndarray, float]:
         """(S, n) coarse geodesic distances (m) from several points (S, 2), one compiled call."""
@@ -58,24 +56,22 @@ class Walkable:
         return distances_from_many(self.coarse, cells) * res, res
 
     def geodesic(self, dist: np.ndarray, goal: np.ndarray) -> float:
-        rc = tuple(int(v) for v in self.package.occupancy.to_cell(goal) // self.coarse_factor)
-        rows, cols = self.coarse.index.shape
-        if not (0 <= rc[0] < rows and 0 <= rc[1] < cols) or self.coarse.index[rc] < 0:
+        """The coarse geodesic distance (m) to ``goal`` from a row of :meth:`geodesics_from`; inf off the graph."""
+        rc = self.package.occupancy.to_cell(goal) // self.coarse_factor
+        if not sample_mask(self.coarse.index >= 0, rc):
             return float("inf")
-        return float(dist[self.coarse.index[rc]])
+        return float(dist[self.coarse.index[tuple(int(v) for v in rc)]])
 
 
-def walkable(package: ScenePackage, radius: float) -> Walkable:
-    """Legal centres at ``radius`` and their largest 8-connected component; a coarse graph for geodesics."""
+def walkable(package: ScenePackage, radius: float, contour_error: float) -> Walkable:
+    """Legal centres at ``radius`` and their largest 4-connected component; a coarse graph for geodesics.
+
+    ``contour_error`` is the crowd navmesh's simplification error, m (it decides which strips survive).
+    """
     grid = package.occupancy
-    room = clearance(grid.free, grid.resolution)
-    legal = room >= radius + 0.5 * grid.resolution
-    labels, count = ndimage.label(legal, structure=np.ones((3, 3)))
-    if count == 0:
-        main = legal
-    else:
-        sizes = np.bincount(labels.ravel())[1:]
-        main = labels == (int(np.argmax(sizes)) + 1)
+    room = clearance_field(grid.free, grid.resolution)
+    legal = walkable_cells(grid.free, grid.resolution, radius, contour_error)
+    main = largest_component(legal)
     factor = max(1, int(round(COARSE_M / grid.resolution)))
     rows, cols = main.shape
     pad = (-rows % factor, -cols % factor)

@@ -137,7 +137,10 @@ class OfflineIntentModel:
         """Pick pairs by score = length + cross-region + relatedness bonuses, with seeded tie-breaking noise.
 
         Args:
+            smap: the scene's semantic map.
             geodesic: estimated walking distance (m) between reachable object pairs (ids).
+            n: how many proposals to return.
+            rng: seeded generator (tie-breaking noise).
         """
         objects = smap.object_by_id()
         scored = []

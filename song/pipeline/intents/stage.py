@@ -9,20 +9,20 @@ from pathlib import Path
 import numpy as np
 
 from song.config import SongConfig
+from song.datasets.run import RunFolder, SceneFolder
+from song.datasets.run.intents import Intent, IntentSet, Provenance, RejectedIntent
+from song.datasets.run.layout import INTENTS_FILE
 from song.datasets.scenes import ScenePackage
 from song.errors import MissingDependencyError
 from song.pipeline.chain import StageContext
 from song.pipeline.intents.llm import GeminiClient, LLMError, OpenAICompatibleClient, scrub, structured_call
-from song.pipeline.intents.model import INTENTS_FILE, Intent, IntentSet, Provenance, RejectedIntent
 from song.pipeline.intents.navigation import Walkable, snap_points, walkable
 from song.pipeline.intents.offline import OfflineIntentModel
 from song.pipeline.intents.schemas import RoutineSelection, SceneDescription, load_prompt
 from song.util import write_json_atomic
 
 MAX_SOURCE_OBJECTS = 16
-MAX_CANDIDATES = (
-    40  # candidate pairs listed in prompt B  # objects from which geodesics are estimated for pair proposals
-)
+MAX_CANDIDATES = 40  # candidate pairs listed in prompt B (MAX_SOURCE_OBJECTS: objects geodesics start from)
 
 
 def pedestrian_count(area_m2: float, config: SongConfig) -> int:
@@ -140,6 +140,7 @@ def choose_provider(llm: str) -> str:
 
 
 def make_client(provider: str, config: SongConfig):
+    """The LLM client of ``provider`` ("gemini" or "openai") with the intents settings."""
     cfg = config.intents
     if provider == "gemini":
         return GeminiClient(cfg.gemini_model, cfg.timeout_s, base_url=os.environ.get("SONG_GEMINI_BASE_URL"))
@@ -178,7 +179,7 @@ def generate_intents(
     package: ScenePackage, config: SongConfig, rng: np.random.Generator, cache_dir: Path | None = None
 ) -> IntentSet:
     """Proposals (LLM or offline) → filtered intents for one scene; an LLM failure falls back to offline."""
-    walk = walkable(package, config.crowd.agent_radius_m)
+    walk = walkable(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
     regions = {region.id: region.polygon for region in package.semantic_map.regions}
     snaps = {obj.id: snap_points(walk, obj.footprint, regions.get(obj.region)) for obj in package.semantic_map.objects}
     snaps = {k: v for k, v in snaps.items() if len(v)}
@@ -213,6 +214,7 @@ def generate_intents(
 
 def run_intents(ctx: StageContext) -> list[str]:
     """Stage entry: write ``intents.json``."""
-    intents = generate_intents(ctx.scene, ctx.config, ctx.rng("intents"), cache_dir=ctx.run_dir / "llm_cache")
-    write_json_atomic(ctx.scene_dir / INTENTS_FILE, intents.model_dump(mode="json"))
+    run = RunFolder(ctx.run_dir)
+    intents = generate_intents(ctx.scene, ctx.config, ctx.rng("intents"), cache_dir=run.llm_cache)
+    write_json_atomic(SceneFolder(ctx.scene_dir).intents, intents.model_dump(mode="json"))
     return [INTENTS_FILE]

@@ -1,5 +1,7 @@
-"""Motion stage (DESIGN §5.3): planned root tracks → full-body motion on the 24-joint skeleton,
-trajectory-consistency post-processing, AMASS export (``human_amass/traj_{id}/``)."""
+"""Motion stage (DESIGN §5.3): planned root tracks → full-body motion on the 24-joint skeleton.
+
+Then trajectory-consistency post-processing and AMASS export (``human_amass/traj_{id}/``).
+"""
 
 from song.pipeline.chain import Stage, register_stage
 from song.pipeline.motion.generators import MotionGenerator, ProceduralGait, make_generator
@@ -7,7 +9,7 @@ from song.pipeline.motion.io import LoadedMotion, load_motion
 from song.pipeline.motion.stage import read_trajectories, run_motion, synthesize_motions
 from song.pipeline.motion.types import Motion, Trajectory
 
-register_stage(Stage(name="motion", run=run_motion, depends=("crowd",), config_section="motion"))
+register_stage(Stage(name="motion", run=run_motion, depends=("crowd",), reads=("motion",)))
 
 __all__ = [
     "LoadedMotion",

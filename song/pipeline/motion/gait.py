@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 
+from song.config import MotionConfig
 from song.geometry.fk import global_to_local
 from song.geometry.ik import two_bone_ik
 from song.geometry.rotations import matrix_to_quat, quat_slerp, quat_to_matrix, rot_x, rot_y, rot_z, wrap_angle
@@ -74,6 +75,7 @@ class GaitStyle:
     idle_phase: float  # radians, offsets the idle weight shift
 
     def to_json(self) -> dict:
+        """The style as a JSON-able dict (recorded in each motion's meta)."""
         return {k: round(v, 6) for k, v in asdict(self).items()}
 
 
@@ -96,6 +98,11 @@ def sample_style(
         start_phase=float(REST_PHASE + rng.integers(0, 2)),
         idle_phase=float(rng.uniform(0.0, 2 * np.pi)),
     )
+
+
+def style_for(seed: int, cfg: MotionConfig) -> GaitStyle:
+    """The per-pedestrian style (and body height) drawn from its seed (every generator uses it)."""
+    return sample_style(np.random.default_rng(seed), (cfg.height_min_m, cfg.height_max_m), cfg.walk_ratio_m_s)
 
 
 def cadence_steps_per_s(speed: np.ndarray, walk_ratio: float, min_cadence_spm: float) -> np.ndarray:

@@ -1,5 +1,7 @@
-"""The :class:`MotionGenerator` interface, the always-available :class:`ProceduralGait`, and the choice
-between it and Kimodo (DESIGN §5.3).
+"""Motion generators (DESIGN §5.3).
+
+The :class:`MotionGenerator` interface, the always-available :class:`ProceduralGait`, and the choice
+between it and Kimodo.
 
 ``generate(trajectories, activities, seeds) -> list[Motion]`` is batched over pedestrians: one
 motion per trajectory, in order, each at the generator's own time stamps (post-processing resamples
@@ -11,11 +13,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
-import numpy as np
-
 from song.config import MotionConfig
 from song.errors import StageError
-from song.pipeline.motion.gait import GaitStyle, generate_gait, sample_style
+from song.pipeline.motion.gait import generate_gait, style_for
 from song.pipeline.motion.types import Motion, Trajectory
 
 
@@ -31,11 +31,6 @@ class MotionGenerator(Protocol):
         ...
 
 
-def style_for(seed: int, cfg: MotionConfig) -> GaitStyle:
-    """The per-pedestrian style (and body height) drawn from its seed."""
-    return sample_style(np.random.default_rng(seed), (cfg.height_min_m, cfg.height_max_m), cfg.walk_ratio_m_s)
-
-
 class ProceduralGait:
     """Walk-ratio procedural gait (:mod:`song.pipeline.motion.gait`); needs nothing but numpy."""
 
@@ -47,6 +42,7 @@ class ProceduralGait:
     def generate(
         self, trajectories: Sequence[Trajectory], activities: Sequence[str], seeds: Sequence[int]
     ) -> list[Motion]:
+        """One procedural motion per trajectory, each with its own style drawn from its seed."""
         if not (len(trajectories) == len(activities) == len(seeds)):
             raise ValueError("trajectories, activities and seeds must have the same length")
         motions = []

@@ -15,23 +15,16 @@ from typing import Any
 
 import numpy as np
 
+from song.datasets.run.layout import AMASS_FILE, MOTION_FILE, MOTION_META_FILE
 from song.errors import FormatError
 from song.geometry.fk import forward_kinematics
 from song.pipeline.motion.amass import to_amass, write_amass
 from song.pipeline.motion.types import Motion
 from song.util import write_json_atomic, write_npz_atomic
 
-AMASS_DIR = "human_amass"
-MOTION_FILE = "motion.npz"
-AMASS_FILE = "motion_amass.npz"
-META_FILE = "meta.json"
 MOTION_FORMAT = "song.motion"
 MOTION_VERSION = 1
 _KEYS = ("t", "frame", "height_m", "rest_joints", "local_quats", "root_pos", "joints", "contacts")
-
-
-def traj_dir_name(ped_id: int) -> str:
-    return f"traj_{int(ped_id)}"
 
 
 def motion_arrays(motion: Motion) -> dict[str, np.ndarray]:
@@ -62,8 +55,8 @@ def write_motion(traj_dir: str | Path, motion: Motion, meta: dict[str, Any], fps
     write_npz_atomic(traj_dir / MOTION_FILE, **arrays)
     amass = to_amass(arrays["local_quats"], arrays["root_pos"], arrays["rest_joints"], fps)
     write_amass(traj_dir / AMASS_FILE, amass)
-    write_json_atomic(traj_dir / META_FILE, meta)
-    return [traj_dir / MOTION_FILE, traj_dir / AMASS_FILE, traj_dir / META_FILE]
+    write_json_atomic(traj_dir / MOTION_META_FILE, meta)
+    return [traj_dir / MOTION_FILE, traj_dir / AMASS_FILE, traj_dir / MOTION_META_FILE]
 
 
 @dataclass(frozen=True)
@@ -101,9 +94,9 @@ def load_motion(traj_dir: str | Path) -> LoadedMotion:
     if arrays["local_quats"].shape != (n, 24, 4) or arrays["root_pos"].shape != (n, 3):
         raise FormatError(path, "local_quats", f"expected ({n}, 24, 4), got {arrays['local_quats'].shape}")
     try:
-        meta = json.loads((traj_dir / META_FILE).read_text(encoding="utf-8"))
+        meta = json.loads((traj_dir / MOTION_META_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise FormatError(traj_dir / META_FILE, "", f"cannot read ({exc})") from None
+        raise FormatError(traj_dir / MOTION_META_FILE, "", f"cannot read ({exc})") from None
     return LoadedMotion(
         t=arrays["t"],
         frame=arrays["frame"],

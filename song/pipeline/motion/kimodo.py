@@ -41,7 +41,7 @@ from song.errors import MissingDependencyError, SongError
 from song.geometry.fk import global_to_local
 from song.geometry.rotations import matrix_to_quat, rot_z
 from song.geometry.skeleton import JOINT_NAMES, rest_joints
-from song.pipeline.motion.generators import style_for
+from song.pipeline.motion.gait import style_for
 from song.pipeline.motion.types import Motion, Trajectory, body_heading
 
 ENCODER_PRESET = "song-cached"
@@ -135,6 +135,7 @@ class CachedTextEncoder:
         self._memory: dict[str, np.ndarray] = {}
 
     def to(self, device: Any = None, dtype: Any = None) -> CachedTextEncoder:
+        """Move to a device / dtype (the torch module protocol Kimodo calls)."""
         if device is not None:
             self.device = device
         if dtype is not None:
@@ -153,6 +154,7 @@ class CachedTextEncoder:
         return self._memory[text]
 
     def __call__(self, texts: str | list[str]) -> tuple[Any, list[int]]:
+        """Encode prompts from the cache: (embeddings, lengths), as Kimodo's text encoder returns."""
         import torch
 
         texts = _sanitize([texts] if isinstance(texts, str) else list(texts))  # idempotent

@@ -96,9 +96,15 @@ def motion_quality(
     """All quality figures of one motion as a JSON-ready dict (metres, degrees, ratios).
 
     Args:
-        joints: ``(T, 24, 3)`` world joints; local_quats: ``(T, 24, 4)``; rest_joints: ``(24, 3)``.
-        contacts: ``(T, 2)`` bool; t: ``(T,)`` s; plan_xy: ``(T, 2)`` m; plan_speed: ``(T,)`` m/s.
-        walk_ratio, min_cadence_spm: the cadence model's parameters.
+        joints: ``(T, 24, 3)`` world joints, m.
+        local_quats: ``(T, 24, 4)`` wxyz parent-local rotations.
+        rest_joints: ``(24, 3)`` rest pose, m.
+        contacts: ``(T, 2)`` bool foot contacts (left, right).
+        t: ``(T,)`` s.
+        plan_xy: ``(T, 2)`` planned root positions, m.
+        plan_speed: ``(T,)`` planned speed, m/s.
+        walk_ratio: the cadence model's walk ratio, m·s.
+        min_cadence_spm: the cadence model's floor, steps/min.
     """
     fps = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 30.0
     gaps = sole_gaps(joints, rest_joints)

@@ -2,45 +2,36 @@
 
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow.parquet as pq
 
 from song.config import MotionConfig
-from song.errors import FormatError
+from song.datasets.run import SceneFolder, read_crowd_table, read_intents, traj_dir_name
+from song.errors import SongError
 from song.geometry.skeleton import JOINT_NAMES, PARENTS
 from song.pipeline.chain import StageContext
 from song.pipeline.motion.amass import HAND_SLOTS, pelvis_j0
 from song.pipeline.motion.generators import MotionGenerator, ProceduralGait, make_generator
-from song.pipeline.motion.io import (
-    AMASS_DIR,
-    MOTION_FORMAT,
-    MOTION_VERSION,
-    traj_dir_name,
-    write_motion,
-)
+from song.pipeline.motion.io import MOTION_FORMAT, MOTION_VERSION, write_motion
 from song.pipeline.motion.postprocess import postprocess
 from song.pipeline.motion.quality import motion_quality
 from song.pipeline.motion.types import Motion, Trajectory
 
-CROWD_FILE = "crowd.parquet"
-_COLUMNS = ("ped_id", "frame", "t", "x", "y", "yaw", "speed")
 AMASS_FRAME = (
     "world Z up, metres; root_orient = world-from-SMPL-native (SMPL rest faces +Z, Y up, left +X); pelvis = trans + J0"
 )
 
 
 def read_trajectories(path: str | Path) -> list[Trajectory]:
-    """Per-pedestrian trajectories from a ``crowd.parquet`` (sorted by ped_id, then frame)."""
-    try:
-        table = pq.read_table(path, columns=list(_COLUMNS))
-    except (OSError, ValueError, KeyError) as exc:
-        raise FormatError(path, "", f"cannot read crowd table ({exc})") from None
-    col = {name: table.column(name).to_numpy() for name in _COLUMNS}
+    """Per-pedestrian trajectories from a ``crowd.parquet`` (sorted by ped_id, then frame).
+
+    Tracks may cover different frame ranges (the motion stage does not need the whole scenario).
+    """
+    table = read_crowd_table(path)
+    col = {name: table.column(name).to_numpy() for name in table.column_names}
     if len(col["ped_id"]) == 0:
         return []
     order = np.lexsort((col["frame"], col["ped_id"]))
@@ -62,13 +53,13 @@ def read_trajectories(path: str | Path) -> list[Trajectory]:
     return out
 
 
-def _activities(scene_dir: Path, ids: list[int]) -> list[str]:
+def _activities(scene: SceneFolder, ids: list[int]) -> list[str]:
+    """Each pedestrian's activity from ``intents.json`` ("" when the file or the pedestrian is missing)."""
     try:
-        data = json.loads((scene_dir / "intents.json").read_text(encoding="utf-8"))
-        by_id = {int(item["id"]): str(item.get("activity", "")) for item in data.get("intents", [])}
-    except (OSError, ValueError, KeyError, TypeError):
+        by_id = read_intents(scene.intents).by_id()
+    except SongError:
         by_id = {}
-    return [by_id.get(i, "") for i in ids]
+    return [by_id[i].activity if i in by_id else "" for i in ids]
 
 
 def _meta(motion: Motion, traj: Trajectory, alignment: dict, quality: dict, generator: dict) -> dict[str, Any]:
@@ -147,18 +138,18 @@ def synthesize_motions(
 def run_motion(ctx: StageContext) -> list[str]:
     """Stage entry: one folder of motion files per pedestrian of ``crowd.parquet``."""
     cfg = ctx.config.motion
-    trajectories = read_trajectories(ctx.scene_dir / CROWD_FILE)
+    scene = SceneFolder(ctx.scene_dir)
+    trajectories = read_trajectories(scene.crowd)
     ids = [traj.ped_id for traj in trajectories]
     seeds = [int(ctx.rng(ped_id).integers(0, 2**63 - 1)) for ped_id in ids]
-    results = synthesize_motions(trajectories, _activities(ctx.scene_dir, ids), seeds, cfg)
-    root = ctx.scene_dir / AMASS_DIR
+    results = synthesize_motions(trajectories, _activities(scene, ids), seeds, cfg)
     keep = {traj_dir_name(i) for i in ids}
-    if root.exists():
-        for stale in root.glob("traj_*"):
+    if scene.amass_dir.exists():
+        for stale in scene.amass_dir.glob("traj_*"):
             if stale.is_dir() and stale.name not in keep:
                 shutil.rmtree(stale)
     written: list[str] = []
     for (motion, meta), traj in zip(results, trajectories, strict=True):
-        for path in write_motion(root / traj_dir_name(traj.ped_id), motion, meta, traj.fps):
+        for path in write_motion(scene.traj_dir(traj.ped_id), motion, meta, traj.fps):
             written.append(path.relative_to(ctx.scene_dir).as_posix())
     return written

@@ -1,11 +1,15 @@
-"""Synthetic planned trajectories for tests and benchmarks (straight, curves, stop-and-go, standing,
-turning on the spot), integrated from speed and yaw-rate profiles at 30 FPS."""
+"""Synthetic planned trajectories for tests and benchmarks.
+
+Straight, curves, stop-and-go, standing, turning on the spot: integrated from speed and yaw-rate
+profiles at 30 FPS.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from song.pipeline.motion.types import FPS, Trajectory
+from song.config import DEFAULT_FPS as FPS
+from song.pipeline.motion.types import Trajectory
 
 
 def trajectory_from_profiles(
@@ -37,8 +41,11 @@ def _ramp(n: int, rise: int, level: float) -> np.ndarray:
 
 
 def synthetic_trajectories(seconds: float = 12.0) -> dict[str, Trajectory]:
-    """Named scenarios: straight walks at 0.5/1.0/1.4 m/s, a curve, a slalom, stop-and-go,
-    standing, turning on the spot, accelerate-and-stop."""
+    """Named scenarios.
+
+    Straight walks at 0.5/1.0/1.4 m/s, a curve, a slalom, stop-and-go, standing, turning on the spot,
+    accelerate-and-stop.
+    """
     n = int(seconds * FPS)
     t = np.arange(n) / FPS
     rise = int(1.0 * FPS)

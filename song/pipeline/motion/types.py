@@ -7,10 +7,11 @@ from typing import Any
 
 import numpy as np
 
+from song.config import DEFAULT_FPS
+from song.datasets.run.layout import CROWD_FILE
 from song.errors import InputError
 from song.geometry.fk import forward_kinematics
 
-FPS = 30.0
 MAX_TURN_RATE = 4.0  # rad/s: a body turns at most this fast (≈ 180° in 0.8 s); plans may flip yaw in one frame
 
 
@@ -57,21 +58,22 @@ class Trajectory:
     def __post_init__(self) -> None:
         n = len(self.t)
         if n < 1 or self.xy.shape != (n, 2) or self.yaw.shape != (n,) or self.speed.shape != (n,):
-            raise InputError("crowd.parquet", f"ped_id={self.ped_id}", "inconsistent trajectory arrays")
+            raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", "inconsistent trajectory arrays")
         if n > 1 and not np.all(np.diff(self.t) > 0):
-            raise InputError("crowd.parquet", f"ped_id={self.ped_id}.t", "times must be strictly increasing")
+            raise InputError(CROWD_FILE, f"ped_id={self.ped_id}.t", "times must be strictly increasing")
         if not (np.all(np.isfinite(self.xy)) and np.all(np.isfinite(self.yaw))):
-            raise InputError("crowd.parquet", f"ped_id={self.ped_id}", "non-finite x, y or yaw")
+            raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", "non-finite x, y or yaw")
 
     @property
     def n_frames(self) -> int:
+        """Number of samples."""
         return len(self.t)
 
     @property
     def fps(self) -> float:
         """Frame rate from the time stamps (30 when there is a single frame)."""
         if len(self.t) < 2:
-            return FPS
+            return float(DEFAULT_FPS)
         return float(round(1.0 / np.median(np.diff(self.t)), 6))
 
 
@@ -104,6 +106,7 @@ class Motion:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames."""
         return len(self.t)
 
     def fk(self) -> tuple[np.ndarray, np.ndarray]:

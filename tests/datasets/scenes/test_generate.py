@@ -5,14 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from song.datasets.scenes import load_scene_package
 from song.datasets.scenes.generate import VENUE_ORDER, generate_scenes
 from song.datasets.scenes.package import PACKAGE_FILES
 from song.datasets.scenes.ply import read_gaussian_ply
 from song.datasets.scenes.usd import read_usd_proxy
-from song.geometry.gridpath import clearance
+from song.geometry.freespace import components, erode
 
 
 def _files(root: Path) -> dict[str, bytes]:
@@ -27,8 +26,8 @@ def test_every_venue_is_valid_connected_and_complete(tmp_path: Path) -> None:
         package = load_scene_package(root)
         assert all((root / name).is_file() for name in PACKAGE_FILES)
         grid = package.occupancy
-        legal = clearance(grid.free, grid.resolution) >= 0.25 + grid.resolution / 2
-        _, parts = ndimage.label(legal, structure=np.ones((3, 3)))
+        legal = erode(grid.free, grid.resolution, 0.25)
+        _, parts = components(legal)
         assert parts == 1, f"{root.name}: walkable area split in {parts}"
         x0, y0, x1, y1 = package.semantic_map.bounds
         assert 6 <= x1 - x0 <= 40 and 6 <= y1 - y0 <= 30

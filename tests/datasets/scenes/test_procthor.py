@@ -8,13 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import ndimage
 from shapely import contains_xy
 from shapely.geometry import Polygon
 
 from song.datasets.scenes import load_scene_package
 from song.datasets.scenes.procthor import import_procthor, unity_to_world, unity_yaw_axes
-from song.geometry.gridpath import clearance
+from song.geometry.freespace import components, erode
 
 HOUSES = Path(__file__).resolve().parents[2] / "data" / "procthor_houses"
 
@@ -40,18 +39,18 @@ def test_rooms_connect_and_area_is_plausible(imported: list[Path]) -> None:
     for root in imported:
         package = load_scene_package(root)
         grid = package.occupancy
-        legal = clearance(grid.free, grid.resolution) >= 0.25 + grid.resolution / 2
-        labels, _ = ndimage.label(legal, structure=np.ones((3, 3)))
+        legal = erode(grid.free, grid.resolution, 0.25)
+        labels, _ = components(legal)
         centres = grid.to_world(np.argwhere(np.ones(grid.shape, bool)))
         flat = labels.ravel()
-        components = set()
+        found = set()
         regions = package.semantic_map.regions
         assert len(regions) == 4
         for region in regions:
             inside = contains_xy(Polygon(region.polygon), centres[:, 0], centres[:, 1]) & (flat > 0)
             ids, counts = np.unique(flat[inside], return_counts=True)
-            components.add(int(ids[np.argmax(counts)]))  # the room's main walkable part
-        assert len(components) == 1, f"{root.name}: rooms fall in {len(components)} separate parts"
+            found.add(int(ids[np.argmax(counts)]))  # the room's main walkable part
+        assert len(found) == 1, f"{root.name}: rooms fall in {len(found)} separate parts"
         free_m2 = grid.free.sum() * grid.resolution**2
         rooms_m2 = sum(Polygon(r.polygon).area for r in regions)
         assert 0.5 * rooms_m2 < free_m2 < rooms_m2

@@ -111,12 +111,13 @@ def test_compact_and_materialized_pose_alike(make_scene, tmp_path, pool) -> None
 def test_release_rows_reference_the_binding(make_scene, tmp_path, pool) -> None:
     from song.datasets.bench.export import _avatar_rows
     from song.datasets.bench.io import BlobStore
+    from song.datasets.run import RunFolder
     from song.util import sha256_file
 
     ctx = _bound(make_scene, tmp_path, pool)
     for amass in (False, True):
         store = BlobStore(tmp_path / f"release-{amass}")
-        rows = _avatar_rows(ctx.run_dir, ctx.scene_id, [0, 1, 2], store, amass)
+        rows = _avatar_rows(RunFolder(ctx.run_dir), ctx.scene_id, [0, 1, 2], store, amass)
         for row in rows:
             cache = load_compact_cache(store.root / row["cache"]["path"])
             assert cache.meta["ped_id"] == row["ped_id"] and cache.meta["avatar_id"] == row["avatar_id"]

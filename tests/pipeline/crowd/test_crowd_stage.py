@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from song.config import SongConfig
+from song.datasets.run import read_crowd, read_intents
 from song.datasets.scenes import load_scene_package
 from song.pipeline.chain import iter_run
-from song.pipeline.crowd import load_crowd, load_navmesh
-from song.pipeline.intents import load_intents
+from song.pipeline.crowd import load_navmesh
 from song.pipeline.intents.navigation import walkable
 from tests.conftest import SAMPLES
 
@@ -23,15 +23,15 @@ R = SongConfig().crowd.agent_radius_m
 @pytest.mark.parametrize("scene", SCENES)
 def test_crowd_invariants(sample_run: Path, scene: str) -> None:
     scene_dir = sample_run / "scenes" / scene
-    crowd = load_crowd(scene_dir)
+    crowd = read_crowd(scene_dir)
     assert crowd.xy.shape[0] >= 2
     d = np.linalg.norm(crowd.xy[:, None] - crowd.xy[None], axis=-1)
     d[np.arange(len(d)), np.arange(len(d))] = np.inf
     assert d.min() >= 2 * R - 0.01
-    walk = walkable(load_scene_package(SAMPLES / scene), R)
+    walk = walkable(load_scene_package(SAMPLES / scene), R, SongConfig().crowd.contour_error_m)
     assert walk.on_main(crowd.xy.reshape(-1, 2)).all()
     assert load_navmesh(scene_dir).contains(crowd.xy.reshape(-1, 2), tol=1e-6).all()  # on the navmesh
-    intents = {i.id: i for i in load_intents(scene_dir).intents}
+    intents = {i.id: i for i in read_intents(scene_dir).intents}
     steps = np.linalg.norm(np.diff(crowd.xy, axis=1), axis=-1) * 30
     max_speed = np.array([intents[int(i)].speed for i in crowd.ids])
     assert (steps <= max_speed[:, None] * 1.01 + 1e-9).all()

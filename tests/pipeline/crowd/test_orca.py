@@ -1,4 +1,4 @@
-"""ORCA: the vectorised step against its per-agent reference twin, and its invariants (hypothesis)."""
+"""ORCA: the compiled step against its per-agent reference twin, and its invariants (hypothesis)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import song.pipeline.crowd.orca as orca
-from song.pipeline.crowd import _reference as ref
-from song.pipeline.crowd.orca import OrcaParams, build_obstacles, orca_step
+from song.pipeline.crowd import _orca_reference as ref
+from song.pipeline.crowd.orca import OrcaParams, build_obstacles, orca_lines, orca_step
 
 # Tolerances, each with its reason.
-TWIN_TOL = 1e-9  # m/s: same float64 formulas, the LP solved loop-free instead of line by line
+TWIN_TOL = 1e-9  # m/s: same float64 formulas; compiled code may fuse or reorder a few operations
 LINE_TOL = 1e-9  # half-plane slack (m/s) allowed for a feasible 2-D LP answer: rounding only
 SPEED_TOL = 1e-12  # relative: the answer lies in the max-speed disc
 
@@ -34,7 +33,7 @@ def _agents(n: int, seed: int, spread: float = 1.0):
 
 
 @pytest.mark.parametrize("seed", range(4))
-@pytest.mark.parametrize("n", [1, 2, 9, 40, 130])  # 130 > DENSE_NEIGHBOURS_MAX_N: the k-d tree path
+@pytest.mark.parametrize("n", [1, 2, 9, 40, 130])
 @pytest.mark.parametrize("walls", [False, True])
 def test_matches_reference_twin(n: int, seed: int, walls: bool) -> None:
     obstacles = build_obstacles(_room()) if walls else None
@@ -47,11 +46,30 @@ def test_dense_crowd_uses_the_3d_lp_and_matches_twin(seed: int) -> None:
     """Squeezed agents (2-D LP infeasible) go through linearProgram3, with walls kept hard."""
     pos, vel, pref, radii, speeds = _agents(120, 100 + seed, spread=0.6)
     obstacles = build_obstacles(_room())
-    lines, _, n_obst = orca._lines(pos, vel, radii, speeds, obstacles, PARAMS)
-    _, _, fail = orca._lp2(lines, speeds, pref[:, 0], pref[:, 1])
-    assert (fail < lines.shape[1]).sum() >= 10 and n_obst > 0
+    lines = orca_lines(pos, vel, radii, speeds, obstacles, PARAMS)
+    infeasible = 0
+    for i, (points, dirs, _) in enumerate(lines):
+        twin = [(tuple(p), tuple(d)) for p, d in zip(points, dirs, strict=True)]
+        fail, _ = ref._lp2(twin, speeds[i], tuple(pref[i]), False)
+        infeasible += fail < len(twin)
+    assert infeasible >= 10 and sum(k for _, _, k in lines) > 0
     args = (pos, vel, pref, radii, speeds, obstacles, PARAMS)
     np.testing.assert_allclose(orca_step(*args), ref.orca_step_reference(*args), rtol=0, atol=TWIN_TOL)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_lines_match_the_reference_twin(seed: int) -> None:
+    """The compiled half-planes are the twin's, in the same order (obstacle lines first)."""
+    pos, vel, _, radii, speeds = _agents(40, 200 + seed)
+    obstacles = build_obstacles(_room())
+    for i, (points, dirs, n_obst) in enumerate(orca_lines(pos, vel, radii, speeds, obstacles, PARAMS)):
+        p, v = tuple(pos[i]), tuple(vel[i])
+        twin = ref._obstacle_lines(p, v, radii[i], speeds[i], obstacles, PARAMS)
+        assert n_obst == len(twin)
+        for j in ref._agent_neighbours(i, [tuple(q) for q in pos], PARAMS):
+            twin.append(ref._agent_line(p, v, radii[i], tuple(pos[j]), tuple(vel[j]), radii[j], PARAMS))
+        np.testing.assert_allclose(points, [q for q, _ in twin] or np.zeros((0, 2)), rtol=0, atol=TWIN_TOL)
+        np.testing.assert_allclose(dirs, [d for _, d in twin] or np.zeros((0, 2)), rtol=0, atol=TWIN_TOL)
 
 
 def test_build_obstacles_vertex_order_and_convexity() -> None:

@@ -188,10 +188,8 @@ def test_one_step_from_identical_states_differs_only_by_float32_rounding() -> No
 
 
 def _lines_of(lines, agent: int) -> tuple[np.ndarray, np.ndarray]:
-    px, py, dx, dy, real, _ = lines
-    keep = real[agent]
-    points = np.column_stack([px[agent][keep], py[agent][keep]])
-    return points, np.column_stack([dx[agent][keep], dy[agent][keep]])
+    points, directions, _ = lines[agent]
+    return points, directions
 
 
 def _scene() -> tuple[list[np.ndarray], ObstacleSet]:

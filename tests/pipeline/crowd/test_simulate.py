@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from song.config import SongConfig
+from song.datasets.run.intents import Intent, Provenance
 from song.datasets.scenes import load_scene_package
 from song.geometry.navmesh import Navmesh
-from song.pipeline.crowd.navmesh import crowd_obstacles, scene_navmesh
+from song.pipeline.crowd.avoidance import make_avoidance
+from song.pipeline.crowd.navmesh import scene_navmesh
 from song.pipeline.crowd.simulate import CrowdPlan, plan_crowd
-from song.pipeline.crowd.stage import crowd_parquet_bytes
-from song.pipeline.intents.model import Intent, Provenance
+from song.pipeline.crowd.stage import plan_table
 from song.util import derive_rng
 
 CFG = SongConfig().crowd
@@ -67,7 +68,7 @@ def check_tracks(ids, xy, speed, fps: int, status: dict, mesh: Navmesh, intents:
 def _run(make_scene, intents: list[Intent], seed: int = 0):
     package = load_scene_package(make_scene())
     mesh = scene_navmesh(package, R, CFG.contour_error_m)
-    plan = plan_crowd(intents, mesh, crowd_obstacles(mesh), CFG, derive_rng(seed, "tiny", "crowd"))
+    plan = plan_crowd(intents, mesh, make_avoidance(mesh, CFG), CFG, derive_rng(seed, "tiny", "crowd"))
     return plan, mesh
 
 
@@ -97,8 +98,8 @@ def test_same_seed_same_bytes_other_seed_other_jitter(make_scene) -> None:
     a, _ = _run(make_scene, SWAP, seed=0)
     b, _ = _run(make_scene, SWAP, seed=0)
     c, _ = _run(make_scene, SWAP, seed=1)
-    assert crowd_parquet_bytes(a) == crowd_parquet_bytes(b)
-    assert crowd_parquet_bytes(a) != crowd_parquet_bytes(c)
+    assert plan_table(a).equals(plan_table(b))
+    assert not plan_table(a).equals(plan_table(c))
     assert np.abs(a.xy[:, 0] - c.xy[:, 0]).max() <= 2 * CFG.start_jitter_m  # only the start jitter differs
 
 

@@ -10,8 +10,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from song.config import GradingConfig, SongConfig
+from song.datasets.run import read_crowd
 from song.datasets.scenes import load_scene_package
-from song.pipeline.crowd import load_crowd
 from song.pipeline.grading import count_turns, grade_run, split_difficulty, tercile_bins
 from song.pipeline.grading.sample import Crowd, RobotMap, closest_pass, subtended_deg
 from tests.conftest import SAMPLES
@@ -50,8 +50,8 @@ def test_split_and_mode_constraints(graded, sample_run: Path) -> None:
     assert counts == {"hard": 10, "medium": 20, "easy": 20}
     cfg = SongConfig().grading
     for scene in {r["scene_id"] for r in rows}:
-        tracks = load_crowd(sample_run / "scenes" / scene)
-        crowd = Crowd(tracks.ids, tracks.xy)
+        tracks = read_crowd(sample_run / "scenes" / scene)
+        crowd = Crowd(tracks.ids, tracks.xy, tracks.fps)
         centre, radius = crowd.circle()
         robot = RobotMap.build(load_scene_package(SAMPLES / scene), cfg.robot_radius_m + cfg.path_margin_m)
         for r in (r for r in rows if r["scene_id"] == scene):

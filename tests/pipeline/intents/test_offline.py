@@ -22,7 +22,7 @@ def test_same_seed_same_intents_and_endpoints_reachable() -> None:
     b = generate_intents(package, config, np.random.default_rng(3))
     assert a.model_dump_json() == b.model_dump_json()
     assert 2 <= len(a.intents) <= config.intents.max_pedestrians
-    walk = walkable(package, config.crowd.agent_radius_m)
+    walk = walkable(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
     objects = package.semantic_map.object_by_id()
     for intent in a.intents:
         ends = np.array([intent.start_xy, intent.goal_xy])
@@ -63,7 +63,19 @@ def test_intents_command_reruns_one_scene(sample_run: Path, tmp_path: Path) -> N
     shutil.copytree(sample_run, run)
     before = (run / "scenes/procthor_house_1/intents.json").read_bytes()
     result = CliRunner().invoke(
-        app, ["intents", "--run", str(run), "--scene", "procthor_house_1", "--llm", "offline", "-j", "1"]
+        app,
+        [
+            "rerun",
+            "intents",
+            "--run",
+            str(run),
+            "--scene",
+            "procthor_house_1",
+            "--set",
+            "intents.llm=offline",
+            "-j",
+            "1",
+        ],
     )
     assert result.exit_code == 0, result.output
     assert (run / "scenes/procthor_house_1/intents.json").read_bytes() == before  # same seed, same intents

@@ -9,7 +9,7 @@ from song.config import MotionConfig
 from song.geometry.rotations import quat_to_matrix, wrap_angle, yaw_of_matrix
 from song.geometry.skeleton import JOINT_INDEX as J
 from song.pipeline.motion import ProceduralGait
-from song.pipeline.motion._reference import foot_skating_reference
+from song.pipeline.motion._quality_reference import foot_skating_reference
 from song.pipeline.motion.gait import cadence_steps_per_s, generate_gait, sample_style
 from song.pipeline.motion.postprocess import postprocess
 from song.pipeline.motion.quality import foot_skating_ratio, motion_quality

@@ -11,11 +11,11 @@ import pyarrow.parquet as pq
 import pytest
 
 from song.config import MotionConfig, SongConfig
+from song.datasets.run import CROWD_SCHEMA as SCHEMA  # the crowd.parquet contract
 from song.datasets.scenes import load_scene_package
 from song.errors import FormatError, StageError
 from song.geometry.fk import forward_kinematics
 from song.pipeline.chain import StageContext, load_stages
-from song.pipeline.crowd.stage import SCHEMA  # the crowd.parquet contract
 from song.pipeline.motion import load_motion, read_trajectories, run_motion
 from song.pipeline.motion.amass import from_amass, read_amass
 from song.pipeline.motion.generators import make_generator
@@ -133,10 +133,19 @@ def test_stage_registered_and_cli(make_scene, tmp_path):
 
     from song.cli import app
 
-    result = CliRunner().invoke(app, ["motion", "--help"])
-    assert result.exit_code == 0 and "--generator" in result.output
-    result = CliRunner().invoke(app, ["motion", "--run", str(tmp_path / "missing"), "--generator", "bogus"])
+    result = CliRunner().invoke(app, ["rerun", "--help"])
+    assert result.exit_code == 0 and "motion.generator=kimodo" in " ".join(result.output.split())
+    result = CliRunner().invoke(app, ["rerun", "motion", "--run", str(tmp_path / "missing")])
     assert result.exit_code != 0
+    run = tmp_path / "run"
+    ctx = _ctx(make_scene, tmp_path)
+    from song.pipeline.chain import iter_run
+
+    list(iter_run(ctx.scene.root.parent, run, ctx.config, ["intents"], executor="serial"))
+    before = (run / "run.json").read_bytes()
+    result = CliRunner().invoke(app, ["rerun", "motion", "--run", str(run), "--set", "motion.generator=bogus"])
+    assert result.exit_code == 2 and "motion.generator" in result.output
+    assert (run / "run.json").read_bytes() == before  # a bad override never reaches the run folder
 
 
 @pytest.mark.slow

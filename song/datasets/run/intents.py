@@ -1,6 +1,7 @@
 """The intents stage's artifact: ``intents.json`` (DESIGN §5.1).
 
-CONTRACT: later stages read it with :func:`load_intents`; fields below are stable.
+CONTRACT: later stages, the release export and the pictures read it with :func:`read_intents`; the
+fields below are stable within ``schema_version``.
 """
 
 from __future__ import annotations
@@ -10,9 +11,9 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from song.datasets.run.layout import INTENTS_FILE
 from song.errors import StageError
 
-INTENTS_FILE = "intents.json"
 INTENTS_SCHEMA_VERSION = 1
 
 
@@ -65,10 +66,16 @@ class IntentSet(BaseModel):
     rejected: list[RejectedIntent] = []
     llm_error: str = Field("", description="why the LLM path fell back to the offline model, if it did")
 
+    def by_id(self) -> dict[int, Intent]:
+        """Kept intents keyed by pedestrian id."""
+        return {intent.id: intent for intent in self.intents}
 
-def load_intents(scene_dir: str | Path) -> IntentSet:
-    """Read ``RUN/scenes/<id>/intents.json``."""
-    path = Path(scene_dir) / INTENTS_FILE
+
+def read_intents(path: str | Path) -> IntentSet:
+    """Read ``intents.json`` (a file, or the scene folder holding it)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / INTENTS_FILE
     try:
         return IntentSet.model_validate_json(path.read_bytes())
     except (OSError, ValueError) as exc:

@@ -1,10 +1,10 @@
 """Plain ORCA, one agent at a time, statement by statement after RVO2's ``Agent.cpp`` and ``KdTree.cpp``.
 
-The reference twin of :mod:`song.pipeline.crowd.orca` (same contract, same float64 arithmetic): agent
-neighbours by RVO2's insertion into a sorted, capped list; obstacle neighbours by RVO2's recursive walk
-of the obstacle BSP tree; the obstacle and agent ORCA lines of ``computeNewVelocity``; the incremental
-``linearProgram1/2`` and ``linearProgram3``. Slow and obvious on purpose: tests compare the
-vectorised code with it.
+The reference twin of the compiled kernel behind :func:`song.pipeline.crowd.orca.orca_step` (same
+contract, same float64 arithmetic): agent neighbours by RVO2's insertion into a sorted, capped list;
+obstacle neighbours by RVO2's recursive walk of the obstacle BSP tree; the obstacle and agent ORCA
+lines of ``computeNewVelocity``; the incremental ``linearProgram1/2`` and ``linearProgram3``. Slow and
+obvious on purpose: tests compare the kernel with it.
 """
 
 from __future__ import annotations

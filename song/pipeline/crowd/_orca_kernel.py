@@ -1,32 +1,26 @@
 """ORCA compiled with numba: RVO2's per-agent ``computeNeighbors`` + ``computeNewVelocity``, in float64.
 
-The vectorised step (:mod:`song.pipeline.crowd.orca`) pays a fixed cost of ~100 numpy calls per frame,
-which dominates at the crowd sizes of indoor scenes (a handful of pedestrians at 30 FPS). This kernel
-is the per-agent algorithm of ``_reference.py`` (RVO2's ``Agent.cpp``/``KdTree.cpp`` statement by
-statement) compiled to machine code: agent neighbours by sorted insertion capped at ``max_neighbors``,
-obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack, same visiting order),
-obstacle lines with legs, cut-off and foreign legs, agent lines, ``linearProgram1/2/3``. Tests compare
-it with the reference twin and the vectorised step. :func:`orca_step_compiled` has the signature of
-``orca_step``; the crowd uses it when numba is installed.
+The per-agent algorithm of ``_orca_reference.py`` (RVO2's ``Agent.cpp``/``KdTree.cpp`` statement by
+statement) compiled to machine code -- numpy's per-call overhead dominates at the crowd sizes of indoor
+scenes, so the algorithm is written as scalar loops: agent neighbours by sorted insertion capped at
+``max_neighbors``, obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack,
+same visiting order), obstacle lines with legs, cut-off and foreign legs, agent lines,
+``linearProgram1/2/3``. :mod:`song.pipeline.crowd.orca` is the Python entry point; tests compare it
+with the reference twin and with RVO2 itself (pyrvo).
 """
 
 from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-from song.pipeline.crowd.orca import EPS, ObstacleSet, OrcaParams
-
-try:
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
-HAVE_NUMBA = numba is not None
+EPS = 1e-5  # RVO_EPSILON: parallel-line threshold in the LPs, side tests in the obstacle tree
 
 
 def _jit(fn):
-    return numba.njit(cache=True, nogil=True)(fn) if HAVE_NUMBA else fn
+    return numba.njit(cache=True, nogil=True)(fn)
 
 
 @_jit
@@ -346,29 +340,45 @@ def _lp3(lines, n, n_obst, begin, radius, rx, ry, proj):
 
 
 @_jit
-def _step(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-          neighbor_dist, max_neighbors, time_horizon, th_obst, time_step):  # fmt: skip
+def _agent_lines(i, pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, lines, work):  # fmt: skip
+    """Agent i's ORCA lines into ``lines`` (obstacle lines first); returns (count, obstacle-line count)."""
+    found_v, found_d, stack, nb_idx, nb_d = work
+    n = 0
+    if points.shape[0] > 0:
+        n = _obstacle_lines(pos[i], vel[i], radii[i], speeds[i], points, nxt, prv, dirs, convex, left_t,
+                            right_t, root, th_obst, lines, found_v, found_d, stack)  # fmt: skip
+    n_obst = n
+    count = _agent_neighbours(i, pos, neighbor_dist, max_neighbors, nb_idx, nb_d)
+    for k in range(count):
+        j = nb_idx[k]
+        n = _agent_line(lines, n, pos[i, 0], pos[i, 1], vel[i, 0], vel[i, 1], radii[i], pos[j, 0], pos[j, 1],
+                        vel[j, 0], vel[j, 1], radii[j], time_horizon, time_step)  # fmt: skip
+    return n, n_obst
+
+
+@_jit
+def _work(n_vertices, max_neighbors):
+    found_v = np.empty(max(n_vertices, 1), dtype=np.int64)
+    found_d = np.empty(max(n_vertices, 1))
+    stack = np.empty((2 * n_vertices + 2, 2), dtype=np.int64)
+    return found_v, found_d, stack, np.empty(max_neighbors, dtype=np.int64), np.empty(max_neighbors)
+
+
+@_jit
+def step_kernel(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+                neighbor_dist, max_neighbors, time_horizon, th_obst, time_step):  # fmt: skip
+    """New (N, 2) velocities: every agent's lines, then linearProgram2 (and 3 where 2 is infeasible)."""
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     out = np.zeros((n_agents, 2))
     size = n_vertices + max_neighbors + 1
     lines = np.empty((size, 4))
     proj = np.empty((size, 4))
-    found_v = np.empty(max(n_vertices, 1), dtype=np.int64)
-    found_d = np.empty(max(n_vertices, 1))
-    stack = np.empty((2 * n_vertices + 2, 2), dtype=np.int64)
-    nb_idx = np.empty(max_neighbors, dtype=np.int64)
-    nb_d = np.empty(max_neighbors)
+    work = _work(n_vertices, max_neighbors)
     for i in range(n_agents):
-        n = 0
-        if n_vertices > 0:
-            n = _obstacle_lines(pos[i], vel[i], radii[i], speeds[i], points, nxt, prv, dirs, convex, left_t,
-                                right_t, root, th_obst, lines, found_v, found_d, stack)  # fmt: skip
-        n_obst = n
-        count = _agent_neighbours(i, pos, neighbor_dist, max_neighbors, nb_idx, nb_d)
-        for k in range(count):
-            j = nb_idx[k]
-            n = _agent_line(lines, n, pos[i, 0], pos[i, 1], vel[i, 0], vel[i, 1], radii[i], pos[j, 0], pos[j, 1],
-                            vel[j, 0], vel[j, 1], radii[j], time_horizon, time_step)  # fmt: skip
+        n, n_obst = _agent_lines(i, pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t,
+                                 root, neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, lines,
+                                 work)  # fmt: skip
         fail, rx, ry = _lp2(lines, n, speeds[i], pref[i, 0], pref[i, 1], False)
         if fail < n:
             rx, ry = _lp3(lines, n, n_obst, fail, speeds[i], rx, ry, proj)
@@ -376,58 +386,18 @@ def _step(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, left_t,
     return out
 
 
-_EMPTY = (
-    np.zeros((0, 2)),
-    np.zeros(0, np.int64),
-    np.zeros(0, np.int64),
-    np.zeros((0, 2)),
-    np.zeros(0, np.bool_),
-    np.zeros(0, np.int64),
-    np.zeros(0, np.int64),
-    -1,
-)
-
-
-def orca_step_compiled(
-    positions: np.ndarray,
-    velocities: np.ndarray,
-    pref_velocities: np.ndarray,
-    radii: np.ndarray,
-    max_speeds: np.ndarray,
-    obstacles: ObstacleSet | None,
-    params: OrcaParams,
-) -> np.ndarray:
-    """Same contract as :func:`song.pipeline.crowd.orca.orca_step` (new (N, 2) velocities)."""
-    pos = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
-    n = len(pos)
-    vel = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 2)
-    pref = np.ascontiguousarray(pref_velocities, dtype=np.float64).reshape(-1, 2)
-    radii = np.ascontiguousarray(np.broadcast_to(np.asarray(radii, dtype=np.float64), (n,)))
-    speeds = np.ascontiguousarray(np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (n,)))
-    if obstacles is None or obstacles.n_vertices == 0:
-        tree = _EMPTY
-    else:
-        o = obstacles
-        tree = (
-            np.ascontiguousarray(o.points, dtype=np.float64),
-            np.ascontiguousarray(o.next, dtype=np.int64),
-            np.ascontiguousarray(o.prev, dtype=np.int64),
-            np.ascontiguousarray(o.directions, dtype=np.float64),
-            np.ascontiguousarray(o.convex, dtype=np.bool_),
-            np.ascontiguousarray(o.node_left, dtype=np.int64),
-            np.ascontiguousarray(o.node_right, dtype=np.int64),
-            int(o.root),
-        )
-    return _step(
-        pos,
-        vel,
-        pref,
-        radii,
-        speeds,
-        *tree,
-        float(params.neighbor_dist),
-        int(params.max_neighbors),
-        float(params.time_horizon),
-        float(params.time_horizon_obst),
-        float(params.time_step),
-    )
+@_jit
+def lines_kernel(pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step):  # fmt: skip
+    """Every agent's ORCA lines: ``(lines (N, L, 4) [px, py, dx, dy], counts (N,), obstacle counts (N,))``."""
+    n_agents, n_vertices = pos.shape[0], points.shape[0]
+    size = n_vertices + max_neighbors + 1
+    lines = np.zeros((n_agents, size, 4))
+    counts = np.zeros(n_agents, dtype=np.int64)
+    n_obstacle = np.zeros(n_agents, dtype=np.int64)
+    work = _work(n_vertices, max_neighbors)
+    for i in range(n_agents):
+        counts[i], n_obstacle[i] = _agent_lines(i, pos, vel, radii, speeds, points, nxt, prv, dirs, convex,
+                                                left_t, right_t, root, neighbor_dist, max_neighbors,
+                                                time_horizon, th_obst, time_step, lines[i], work)  # fmt: skip
+    return lines, counts, n_obstacle

@@ -1,0 +1,300 @@
+"""Sensors: the composable parts of an observation (DESIGN §11 "Sensors").
+
+An observation is a dict of named sensor outputs. Each sensor declares its Gymnasium space as a
+:class:`Box` (or a dict of them) without importing Gymnasium, is reset once per episode, and reads
+what it needs from the :class:`RobotView` of the current step. Sensors are chosen by name
+(``song eval --sensors state,scan``; ``SongNavEnv(sensors=...)``); adding one is a class plus one
+entry in :data:`SENSORS`.
+
+Built in:
+- ``state``: the robot's own state: ``pose`` (x, y, yaw; GPS + compass as in PointNav), ``velocity``
+  (last command v, ω), ``goal`` (goal in the robot frame, x forward, y left), ``goal_polar`` (distance,
+  bearing), ``t`` (scenario time).
+- ``scan``: a ring of range rays against walls and pedestrian bodies (a 2-D lidar stand-in).
+- ``pedestrians`` (privileged): every pedestrian's [x, y, vx, vy, present] in the world frame, padded
+  to the release's largest scene.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from typing_extensions import override
+
+from song.datasets.bench.types import Episode, RuntimeParams, pedestrian_states
+from song.errors import SongError
+from song.runtime.robot import Pose, wrap_angle
+from song.runtime.world import StaticWorld, cast_circles
+
+GOAL_RANGE_M = 1000.0  # bound of the goal coordinates in the state space (scenes are far smaller)
+MAX_TIME_S = 1.0e4  # bound of the scenario time in the state space
+
+
+@dataclass(frozen=True)
+class Box:
+    """A Gymnasium ``Box`` declared as data: bounds (scalars or arrays), shape and dtype."""
+
+    low: float | np.ndarray
+    high: float | np.ndarray
+    shape: tuple[int, ...]
+    dtype: type = np.float64
+
+    def contains(self, value: np.ndarray) -> bool:
+        """True when ``value`` has the shape and dtype and lies within the bounds."""
+        value = np.asarray(value)
+        return (
+            value.shape == self.shape
+            and value.dtype == np.dtype(self.dtype)
+            and bool(np.all(value >= self.low) and np.all(value <= self.high))
+        )
+
+
+Space = Box | dict[str, Box]
+
+
+def to_gym_space(space: Space) -> Any:
+    """The Gymnasium space of a declared space (imports Gymnasium)."""
+    from gymnasium import spaces
+
+    if isinstance(space, dict):
+        return spaces.Dict({name: to_gym_space(sub) for name, sub in space.items()})
+    low = np.broadcast_to(np.asarray(space.low, dtype=space.dtype), space.shape).copy()
+    high = np.broadcast_to(np.asarray(space.high, dtype=space.dtype), space.shape).copy()
+    return spaces.Box(low=low, high=high, shape=space.shape, dtype=space.dtype)
+
+
+@dataclass
+class RobotView:
+    """What the sensors may read at one step. Pedestrian states are computed once, on first use.
+
+    Attributes:
+        t: scenario time, s. pose: the robot pose. command: (2,) last (v m/s, ω rad/s).
+        episode: the episode (its static map, goal, tracks, avatars and runtime parameters).
+        world: the episode's static world (clearance field, ray casting).
+    """
+
+    t: float
+    pose: Pose
+    command: np.ndarray
+    episode: Episode
+    world: StaticWorld
+
+    @cached_property
+    def pedestrians(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(ids (P,), xy (P, 2), velocity (P, 2))`` at ``t``."""
+        return pedestrian_states(self.episode.pedestrians, self.t)
+
+
+class Sensor:
+    """Base of every sensor: a name, a declared space, a per-episode reset and an observation per step."""
+
+    name: str = ""
+    privileged: bool = False  # sees what a real robot could not (other agents' true states)
+
+    def __init__(self, params: RuntimeParams, **options: Any) -> None:
+        self.params = params
+
+    def space(self) -> Space:
+        """The declared observation space."""
+        raise NotImplementedError
+
+    def reset(self, episode: Episode) -> None:
+        """Called once before an episode's first observation."""
+
+    def observe(self, view: RobotView) -> np.ndarray | dict[str, np.ndarray]:
+        """The sensor's output at ``view``; it must lie in :meth:`space`."""
+        raise NotImplementedError
+
+    def describe(self) -> dict[str, Any]:
+        """Name and parameters, recorded with evaluation results."""
+        return {"name": self.name, "privileged": self.privileged}
+
+
+class StateSensor(Sensor):
+    """The robot's pose, last command, and the goal in its own frame."""
+
+    name = "state"
+
+    @override
+    def space(self) -> dict[str, Box]:
+        robot = self.params.robot
+        max_w = float(np.deg2rad(robot.max_yaw_rate_deg_s))
+        big = GOAL_RANGE_M
+        return {
+            "pose": Box(np.array([-big, -big, -np.pi]), np.array([big, big, np.pi]), (3,)),
+            "velocity": Box(np.array([0.0, -max_w]), np.array([robot.max_speed_mps, max_w]), (2,)),
+            "goal": Box(-big, big, (2,)),
+            "goal_polar": Box(np.array([0.0, -np.pi]), np.array([2 * big, np.pi]), (2,)),
+            "t": Box(0.0, MAX_TIME_S, (1,)),
+        }
+
+    @override
+    def observe(self, view: RobotView) -> dict[str, np.ndarray]:
+        pose = view.pose
+        rel = view.episode.goal_xy - pose.xy
+        c, s = np.cos(pose.yaw), np.sin(pose.yaw)
+        goal = np.clip([c * rel[0] + s * rel[1], -s * rel[0] + c * rel[1]], -GOAL_RANGE_M, GOAL_RANGE_M)
+        xy = np.clip(pose.xy, -GOAL_RANGE_M, GOAL_RANGE_M)
+        return {
+            "pose": np.array([xy[0], xy[1], pose.yaw if -np.pi <= pose.yaw <= np.pi else wrap_angle(pose.yaw)]),
+            "velocity": np.array(view.command, dtype=np.float64),
+            "goal": goal,
+            "goal_polar": np.array([np.hypot(*goal), np.arctan2(goal[1], goal[0])]),
+            "t": np.array([min(view.t, MAX_TIME_S)]),
+        }
+
+
+class ScanSensor(Sensor):
+    """``n_rays`` range rays (CCW from straight ahead) against walls and pedestrian body discs."""
+
+    name = "scan"
+
+    def __init__(self, params: RuntimeParams, n_rays: int = 72, max_range_m: float = 5.0) -> None:
+        super().__init__(params)
+        if n_rays < 1 or not max_range_m > 0:
+            raise SongError(f"scan sensor: n_rays must be ≥ 1 and max_range_m > 0 (got {n_rays}, {max_range_m})")
+        self.n_rays, self.max_range_m = int(n_rays), float(max_range_m)
+        self.angles = wrap_angle(np.linspace(-np.pi, np.pi, self.n_rays, endpoint=False) + np.pi)
+
+    @override
+    def space(self) -> Box:
+        return Box(0.0, self.max_range_m, (self.n_rays,))
+
+    @override
+    def observe(self, view: RobotView) -> np.ndarray:
+        _, xy, _ = view.pedestrians
+        world_angles = self.angles + view.pose.yaw
+        ranges = np.minimum(
+            view.world.cast(view.pose.xy, world_angles, self.max_range_m),
+            cast_circles(view.pose.xy, world_angles, xy, self.params.pedestrian_radius_m, self.max_range_m),
+        )
+        return np.clip(ranges, 0.0, self.max_range_m)
+
+    @override
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "n_rays": self.n_rays, "max_range_m": self.max_range_m}
+
+
+class PedestrianSensor(Sensor):
+    """Privileged: every pedestrian's world [x, y, vx, vy, present], rows padded with zeros to ``capacity``."""
+
+    name = "pedestrians"
+    privileged = True
+
+    def __init__(self, params: RuntimeParams, capacity: int = 64) -> None:
+        super().__init__(params)
+        self.capacity = int(capacity)
+
+    @override
+    def space(self) -> Box:
+        big = GOAL_RANGE_M
+        low = np.tile(np.array([-big, -big, -big, -big, 0.0]), (self.capacity, 1))
+        high = np.tile(np.array([big, big, big, big, 1.0]), (self.capacity, 1))
+        return Box(low, high, (self.capacity, 5))
+
+    @override
+    def observe(self, view: RobotView) -> np.ndarray:
+        _, xy, vel = view.pedestrians
+        n = min(len(xy), self.capacity)
+        out = np.zeros((self.capacity, 5))
+        out[:n, :2] = np.clip(xy[:n], -GOAL_RANGE_M, GOAL_RANGE_M)
+        out[:n, 2:4] = np.clip(vel[:n], -GOAL_RANGE_M, GOAL_RANGE_M)
+        out[:n, 4] = 1.0
+        return out
+
+    @override
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "capacity": self.capacity}
+
+
+SENSORS: dict[str, Callable[..., Sensor]] = {
+    "state": StateSensor,
+    "scan": ScanSensor,
+    "pedestrians": PedestrianSensor,
+}
+
+
+def register_sensor(name: str, factory: Callable[..., Sensor]) -> None:
+    """Add a sensor type (``factory(params, **options) -> Sensor``) under ``name``."""
+    SENSORS[name] = factory
+
+
+def parse_sensor_names(text: str | Iterable[str]) -> tuple[str, ...]:
+    """``"state,scan"`` (or a list) → validated, de-duplicated names in the given order."""
+    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    for name in names:
+        if name not in SENSORS:
+            raise SongError(f"unknown sensor '{name}'; available: {', '.join(SENSORS)}")
+    return tuple(dict.fromkeys(names))
+
+
+@dataclass
+class SensorSuite:
+    """The sensors of a run, built once for the release's parameters."""
+
+    sensors: dict[str, Sensor] = field(default_factory=dict)
+
+    @classmethod
+    def build(
+        cls,
+        names: Iterable[str],
+        params: RuntimeParams,
+        max_pedestrians: int = 64,
+        options: dict[str, dict] | None = None,
+    ) -> SensorSuite:
+        """Sensors by name for ``params``.
+
+        Args:
+            names: sensor names (see :data:`SENSORS`).
+            params: the runtime parameters (the release's, or explicit overrides).
+            max_pedestrians: rows of the ``pedestrians`` sensor (the release's largest scene).
+            options: per-sensor keyword options, e.g. ``{"scan": {"n_rays": 180}}``.
+        """
+        options = {name: dict(values) for name, values in (options or {}).items()}
+        options.setdefault("pedestrians", {}).setdefault("capacity", max_pedestrians)
+        out = {}
+        for name in parse_sensor_names(names):
+            out[name] = SENSORS[name](params, **options.get(name, {}))
+        return cls(out)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The sensor names, in order."""
+        return tuple(self.sensors)
+
+    @property
+    def privileged(self) -> bool:
+        """True when any sensor is privileged."""
+        return any(s.privileged for s in self.sensors.values())
+
+    def space(self) -> dict[str, Space]:
+        """The observation space: one entry per sensor."""
+        return {name: sensor.space() for name, sensor in self.sensors.items()}
+
+    def reset(self, episode: Episode) -> None:
+        """Reset every sensor for ``episode``."""
+        for sensor in self.sensors.values():
+            sensor.reset(episode)
+
+    def observe(self, view: RobotView) -> dict[str, Any]:
+        """The observation dict at ``view``."""
+        return {name: sensor.observe(view) for name, sensor in self.sensors.items()}
+
+    def describe(self) -> list[dict[str, Any]]:
+        """Every sensor's name and parameters."""
+        return [sensor.describe() for sensor in self.sensors.values()]
+
+
+def space_contains(space: Space, value: Any) -> bool:
+    """True when ``value`` lies in a declared space (dicts recursively)."""
+    if isinstance(space, dict):
+        return (
+            isinstance(value, dict)
+            and set(value) == set(space)
+            and all(space_contains(space[k], value[k]) for k in space)
+        )
+    return space.contains(value)
