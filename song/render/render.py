@@ -1,0 +1,185 @@
+"""``render(gaussians, camera) -> RenderOutput``: RGB-D images of Gaussian splats (DESIGN §11).
+
+Backends behind one call, the same inputs and outputs:
+
+- ``numba`` (CPU, the default here): the compiled tile rasterizer (:mod:`song.render._render_kernel`),
+  after culling whole 256-Gaussian chunks by their boxes against the view frustum;
+- ``gsplat`` (CUDA): gsplat's ``rasterization`` in ``RGB+ED`` mode (``pip install 'song[gpu]'``);
+- ``reference``: the per-pixel numpy twin, for tests on tiny images;
+- ``auto``: gsplat when torch sees a CUDA device and gsplat works (its CUDA code compiles on first use;
+  a failure falls back to numba with one logged line), else numba.
+
+Outputs: ``rgb`` (H, W, 3) uint8 (float colour clipped to [0, 1], rounded), ``depth`` (H, W) float32
+expected planar depth z in metres (Σ wᵢ zᵢ / Σ wᵢ over the composited Gaussians, gsplat's "ED"), and
+``alpha`` (H, W) float32 coverage. A pixel that sees nothing has alpha 0 and depth 0 (as in gsplat and
+Habitat) and the background colour (black by default).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from song.render import _render_kernel as kernel
+from song.render.camera import Camera
+from song.render.gaussians import CHUNK, GaussianSet, concat
+
+log = logging.getLogger(__name__)
+EPS2D = 0.3  # px², the 2-D covariance dilation (gsplat's eps2d)
+CULL_MARGIN_PX = 2.0  # chunks are kept when their box reaches this close to the image edge
+BACKENDS = ("auto", "numba", "gsplat", "reference")
+BIN_PARTS = 8  # slices of the depth order binned in parallel (a fixed count: the lists do not depend on threads)
+
+
+@dataclass(frozen=True)
+class RenderOutput:
+    """One rendered view.
+
+    Attributes:
+        rgb: (H, W, 3) uint8.
+        depth: (H, W) float32 expected planar depth, m (0 where alpha is 0).
+        alpha: (H, W) float32 coverage in [0, 1].
+        rgb_float: (H, W, 3) float32 colour before clipping and quantisation.
+    """
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    alpha: np.ndarray
+    rgb_float: np.ndarray
+
+
+def to_uint8(rgb: np.ndarray) -> np.ndarray:
+    """Float colour (any shape) → uint8: clipped to [0, 1], scaled by 255 and rounded."""
+    return np.rint(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def visible_chunks(gaussians: GaussianSet, camera: Camera) -> np.ndarray:
+    """Indices of the Gaussians whose chunk box is not wholly outside the view frustum (near/far, 4 sides)."""
+    lo, hi = gaussians.chunk_bounds()
+    if len(lo) == 0:
+        return np.zeros(0, dtype=np.int64)
+    corners = np.stack(
+        [np.where(np.array([(k >> a) & 1 for a in range(3)], bool), hi, lo) for k in range(8)], axis=1
+    )  # (C, 8, 3)
+    cam = camera.to_camera(corners)
+    x, y, z = cam[..., 0], cam[..., 1], cam[..., 2]
+    m = CULL_MARGIN_PX
+    outside = (
+        (z < camera.near).all(axis=1)
+        | (z > camera.far).all(axis=1)
+        | (x * camera.fx > z * (camera.width - camera.cx + m)).all(axis=1)
+        | (x * camera.fx < -z * (camera.cx + m)).all(axis=1)
+        | (y * camera.fy > z * (camera.height - camera.cy + m)).all(axis=1)
+        | (y * camera.fy < -z * (camera.cy + m)).all(axis=1)
+    )
+    chunks = np.flatnonzero(~outside)
+    index = (chunks[:, None] * CHUNK + np.arange(CHUNK)[None, :]).ravel()
+    return index[index < len(gaussians)]  # only the last chunk can be short
+
+
+def _render_numba(sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray) -> RenderOutput:
+    selections = [(s, visible_chunks(s, camera)) for s in sets if len(s)]
+    total = sum(len(sel) for _, sel in selections)
+    attr = np.empty((total, kernel.N_ATTR))
+    depth = np.empty(total)
+    rect = np.empty((total, 4), dtype=np.int64)
+    valid = np.zeros(total, dtype=np.bool_)
+    rot = np.ascontiguousarray(camera.rotation, dtype=np.float64)
+    trans = np.ascontiguousarray(camera.translation, dtype=np.float64)
+    pos = np.ascontiguousarray(camera.position, dtype=np.float64)
+    offset = 0
+    for s, sel in selections:
+        if len(sel):
+            kernel.project_kernel(
+                s.means, s.quats, s.scales, s.opacities, s.sh, s.sh_degree, sel, rot, trans, pos,
+                float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy),
+                int(camera.width), int(camera.height), float(camera.near), float(camera.far), EPS2D, offset,
+                attr, depth, rect, valid,
+            )  # fmt: skip
+        offset += len(sel)
+    order = kernel.depth_order(np.flatnonzero(valid), depth)  # one global depth sort; ties by input order
+    tiles_x = (camera.width + kernel.TILE - 1) // kernel.TILE
+    tiles_y = (camera.height + kernel.TILE - 1) // kernel.TILE
+    offsets, ids = kernel.bin_kernel(order, rect, tiles_x, tiles_y, BIN_PARTS)
+    out_rgb = np.empty((camera.height, camera.width, 3), dtype=np.float32)
+    out_depth = np.empty((camera.height, camera.width), dtype=np.float32)
+    out_alpha = np.empty((camera.height, camera.width), dtype=np.float32)
+    kernel.composite_kernel(
+        offsets, ids, attr, int(camera.width), int(camera.height), tiles_x, background, out_rgb, out_depth, out_alpha
+    )
+    return RenderOutput(to_uint8(out_rgb), out_depth, out_alpha, out_rgb)
+
+
+def _render_reference(sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray) -> RenderOutput:
+    from song.render._render_reference import render_reference
+
+    rgb, depth, alpha = render_reference(concat(list(sets)), camera, tuple(background), EPS2D)
+    return RenderOutput(to_uint8(rgb), depth.astype(np.float32), alpha.astype(np.float32), rgb.astype(np.float32))
+
+
+_GSPLAT_STATE: dict[str, str] = {}  # "error" once gsplat failed in this process
+
+
+def gsplat_available() -> str:
+    """ "" when the gsplat backend can run here, else why not (one line)."""
+    if "error" in _GSPLAT_STATE:
+        return _GSPLAT_STATE["error"]
+    try:
+        import torch
+    except ImportError:
+        return "torch is not installed"
+    if not torch.cuda.is_available():
+        return "no CUDA device"
+    try:
+        import gsplat  # noqa: F401
+    except ImportError:
+        return "gsplat is not installed (pip install 'song[gpu]')"
+    return ""
+
+
+def resolve_backend(backend: str) -> str:
+    """The backend that ``backend`` means here (``auto`` → gsplat when usable, else numba)."""
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown render backend '{backend}'; choose one of {', '.join(BACKENDS)}")
+    if backend == "auto":
+        return "gsplat" if not gsplat_available() else "numba"
+    return backend
+
+
+def render(
+    gaussians: GaussianSet | Sequence[GaussianSet],
+    camera: Camera,
+    backend: str = "auto",
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> RenderOutput:
+    """Render one view of one or several Gaussian sets (a scene and the posed avatars, composited together).
+
+    Args:
+        gaussians: a :class:`GaussianSet` or a sequence of them (rendered as one set).
+        camera: the view (:func:`song.render.camera.robot_camera` for a robot).
+        backend: ``auto`` | ``numba`` | ``gsplat`` | ``reference``.
+        background: RGB in [0, 1] behind everything.
+
+    Returns:
+        :class:`RenderOutput` (rgb uint8, depth float32 m, alpha float32).
+    """
+    sets = [gaussians] if isinstance(gaussians, GaussianSet) else list(gaussians)
+    bg = np.asarray(background, dtype=np.float64).reshape(3)
+    name = resolve_backend(backend)
+    if name == "gsplat":
+        from song.render.gsplat_backend import render_gsplat
+
+        try:
+            return render_gsplat(concat(sets), camera, bg, EPS2D)
+        except Exception as exc:  # CUDA compile or runtime failure: fall back once, say so
+            if backend != "auto":
+                raise
+            _GSPLAT_STATE["error"] = f"gsplat failed ({type(exc).__name__}: {exc}); rendering with numba on the CPU"
+            log.warning(_GSPLAT_STATE["error"])
+            name = "numba"
+    if name == "reference":
+        return _render_reference(sets, camera, bg)
+    return _render_numba(sets, camera, bg)
