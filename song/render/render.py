@@ -124,7 +124,7 @@ _GSPLAT_STATE: dict[str, str] = {}  # "error" once gsplat failed in this process
 
 
 def gsplat_available() -> str:
-    """ "" when the gsplat backend can run here, else why not (one line)."""
+    """Why the gsplat backend cannot run here (one line), or the empty string when it can."""
     if "error" in _GSPLAT_STATE:
         return _GSPLAT_STATE["error"]
     try:
