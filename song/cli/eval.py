@@ -11,9 +11,18 @@ from song.cli import app
 from song.cli.common import ConfigOption, SetOption, console, err_console, handle_errors
 from song.config import parse_assignments, read_config_mapping
 from song.datasets.bench import open_benchmark
+from song.errors import SongError
 from song.runtime.evaluate import iter_eval, make_setup, write_results
 from song.runtime.metrics import markdown_table
 from song.runtime.params import apply_overrides
+
+
+def parse_resolution(text: str) -> dict[str, int]:
+    """``"320x240"`` → ``{"width": 320, "height": 240}``."""
+    width, sep, height = text.lower().partition("x")
+    if not sep or not width.isdigit() or not height.isdigit() or int(width) < 1 or int(height) < 1:
+        raise SongError(f"--resolution {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 320x240")
+    return {"width": int(width), "height": int(height)}
 
 
 @app.command("eval")
@@ -22,7 +31,13 @@ def eval_command(
     bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
     policy: list[str] = typer.Option(["social"], "--policy", help="straight | astar | social | module:Class"),
     difficulty: str | None = typer.Option(None, "--difficulty", help="easy | medium | hard (default: all)"),
-    sensors: str | None = typer.Option(None, "--sensors", help="comma-separated sensors (default: the policy's)"),
+    sensors: str | None = typer.Option(
+        None, "--sensors", help="sensors shown besides the policy's own, comma-separated (state, scan, depth, rgb, ...)"
+    ),
+    resolution: str | None = typer.Option(
+        None, "--resolution", metavar="WxH", help="camera sensors' image size (default: the release's, 960x540)"
+    ),
+    render_backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat"),
     out: Path = typer.Option(Path("runs/eval"), "--out", help="results folder"),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
     config: Path | None = ConfigOption,
@@ -43,11 +58,14 @@ def eval_command(
     params, changed = apply_overrides(release.params, requested, override, str(config or "--set"))
     for key, (old, new) in changed.items():
         err_console.print(f"[yellow]override[/yellow] {key}: {old} → {new} (results marked unofficial)")
+    camera: dict = {"backend": render_backend}
+    if resolution:
+        camera.update(parse_resolution(resolution))
     episodes = list(release.episodes(difficulty=difficulty)) if difficulty else None
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:
-        setup = make_setup(release, name, sensors, params, changed)
+        setup = make_setup(release, name, sensors, params, changed, camera)
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:

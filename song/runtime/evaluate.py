@@ -77,10 +77,21 @@ def make_setup(
     sensors: str | list[str] | None = None,
     params: RuntimeParams | None = None,
     overrides: dict[str, list[Any]] | None = None,
+    camera: dict[str, Any] | None = None,
 ) -> EvalSetup:
-    """The setup of one policy: its declared sensors unless ``sensors`` names others."""
-    names = parse_sensor_names(sensors) if sensors else policy_sensors(load_policy(policy))
-    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}))
+    """The setup of one policy.
+
+    Args:
+        bench: the opened release.
+        policy: a baseline name or ``module:Class``.
+        sensors: extra sensors shown to the policy besides the ones it declares.
+        params: runtime parameters (default: the release's).
+        overrides: what ``params`` changed from the release, as recorded.
+        camera: options shared by the camera sensors: ``width``, ``height``, ``backend``.
+    """
+    names = parse_sensor_names([*policy_sensors(load_policy(policy)), *parse_sensor_names(sensors or [])])
+    options = {"camera": dict(camera)} if camera else {}
+    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options)
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,8 @@
 - ``astar``: pure pursuit of the episode's smoothed A* path (blind to people).
 - ``social``: privileged upper bound: the A* path plus a velocity-obstacle rollout planner that
   sees every pedestrian's position and velocity and the static map (like the paper's teleop row).
+- ``depth``: the vision baseline (:mod:`song.runtime.depth_policy`): the depth image, the goal and its
+  own velocity only.
 
 A policy declares the sensors it reads (``sensors``); the robot's limits, its radius and the
 pedestrians' body radius come from the episode's runtime parameters (the release's recorded values),
@@ -207,7 +209,13 @@ class SocialPolicy:
         return float(self.commands[best, 0]), float(self.commands[best, 1])
 
 
-BASELINES = {"straight": StraightPolicy, "astar": AStarPolicy, "social": SocialPolicy}
+def _depth_policy() -> Policy:
+    from song.runtime.depth_policy import DepthPolicy
+
+    return DepthPolicy()
+
+
+BASELINES = {"straight": StraightPolicy, "astar": AStarPolicy, "social": SocialPolicy, "depth": _depth_policy}
 
 
 def load_policy(name: str) -> Policy:

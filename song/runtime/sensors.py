@@ -13,6 +13,11 @@ Built in:
 - ``scan``: a ring of range rays against walls and pedestrian bodies (a 2-D lidar stand-in).
 - ``pedestrians`` (privileged): every pedestrian's [x, y, vx, vy, present] in the world frame, padded
   to the release's largest scene.
+- ``rgb``, ``depth``, ``rgbd``: the robot camera rendered from the scene's Gaussians and the posed
+  avatars (:mod:`song.runtime.vision`): ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres
+  (expected planar depth, 0 where nothing is seen), ``rgbd`` both. The camera (mount height, field of
+  view, near/far) is the release's; the resolution is an option (default the recorded 960×540), and all
+  camera sensors of a run share one render per step.
 """
 
 from __future__ import annotations
@@ -27,7 +32,9 @@ from typing_extensions import override
 
 from song.datasets.bench.types import Episode, RuntimeParams, pedestrian_states
 from song.errors import SongError
+from song.render import resolve_backend
 from song.runtime.robot import Pose, wrap_angle
+from song.runtime.vision import SceneView
 from song.runtime.world import StaticWorld, cast_circles
 
 GOAL_RANGE_M = 1000.0  # bound of the goal coordinates in the state space (scenes are far smaller)
@@ -211,10 +218,102 @@ class PedestrianSensor(Sensor):
         return {**super().describe(), "capacity": self.capacity}
 
 
+class CameraSensor(Sensor):
+    """Base of the rendered camera sensors: a resolution and a shared :class:`SceneView`."""
+
+    def __init__(
+        self,
+        params: RuntimeParams,
+        width: int | None = None,
+        height: int | None = None,
+        backend: str = "auto",
+        scene_view: SceneView | None = None,
+    ) -> None:
+        super().__init__(params)
+        self.width = int(width or params.camera.width_px)
+        self.height = int(height or params.camera.height_px)
+        if self.width < 1 or self.height < 1:
+            raise SongError(f"{self.name} sensor: resolution must be positive (got {self.width}x{self.height})")
+        self.scene_view = scene_view or SceneView(backend)
+
+    @override
+    def reset(self, episode: Episode) -> None:
+        self.scene_view.reset(episode)
+
+    def frame(self, view: RobotView):
+        """The rendered view at this step (one render shared by every camera sensor of the suite)."""
+        return self.scene_view.render(view.pose, view.t, self.width, self.height)
+
+    def _rgb_space(self) -> Box:
+        return Box(0, 255, (self.height, self.width, 3), np.uint8)
+
+    def _depth_space(self) -> Box:
+        return Box(0.0, float(self.params.camera.far_m), (self.height, self.width), np.float32)
+
+    @override
+    def describe(self) -> dict[str, Any]:
+        camera = self.params.camera
+        return {
+            **super().describe(),
+            "width": self.width,
+            "height": self.height,
+            "hfov_deg": camera.hfov_deg,
+            "mount_height_m": camera.height_m,
+            "backend": resolve_backend(self.scene_view.backend),
+        }
+
+
+class RgbSensor(CameraSensor):
+    """The robot camera's colour image."""
+
+    name = "rgb"
+
+    @override
+    def space(self) -> Box:
+        return self._rgb_space()
+
+    @override
+    def observe(self, view: RobotView) -> np.ndarray:
+        return self.frame(view).rgb
+
+
+class DepthSensor(CameraSensor):
+    """The robot camera's depth image: expected planar depth, m; 0 where nothing is seen."""
+
+    name = "depth"
+
+    @override
+    def space(self) -> Box:
+        return self._depth_space()
+
+    @override
+    def observe(self, view: RobotView) -> np.ndarray:
+        return np.minimum(self.frame(view).depth, np.float32(self.params.camera.far_m))
+
+
+class RgbdSensor(CameraSensor):
+    """Colour and depth of one render."""
+
+    name = "rgbd"
+
+    @override
+    def space(self) -> dict[str, Box]:
+        return {"rgb": self._rgb_space(), "depth": self._depth_space()}
+
+    @override
+    def observe(self, view: RobotView) -> dict[str, np.ndarray]:
+        out = self.frame(view)
+        return {"rgb": out.rgb, "depth": np.minimum(out.depth, np.float32(self.params.camera.far_m))}
+
+
+CAMERA_SENSORS = ("rgb", "depth", "rgbd")
 SENSORS: dict[str, Callable[..., Sensor]] = {
     "state": StateSensor,
     "scan": ScanSensor,
     "pedestrians": PedestrianSensor,
+    "rgb": RgbSensor,
+    "depth": DepthSensor,
+    "rgbd": RgbdSensor,
 }
 
 
@@ -252,10 +351,16 @@ class SensorSuite:
             names: sensor names (see :data:`SENSORS`).
             params: the runtime parameters (the release's, or explicit overrides).
             max_pedestrians: rows of the ``pedestrians`` sensor (the release's largest scene).
-            options: per-sensor keyword options, e.g. ``{"scan": {"n_rays": 180}}``.
+            options: per-sensor keyword options, e.g. ``{"scan": {"n_rays": 180}}``; ``"camera"`` holds the
+                options every camera sensor shares: ``width``, ``height``, ``backend``.
         """
         options = {name: dict(values) for name, values in (options or {}).items()}
         options.setdefault("pedestrians", {}).setdefault("capacity", max_pedestrians)
+        camera = options.pop("camera", {})  # width, height, backend: shared by every camera sensor
+        shared = SceneView(camera.get("backend", "auto"))
+        for name in CAMERA_SENSORS:
+            options.setdefault(name, {}).update({**camera, "scene_view": shared})
+            options[name].pop("backend", None)
         out = {}
         for name in parse_sensor_names(names):
             out[name] = SENSORS[name](params, **options.get(name, {}))

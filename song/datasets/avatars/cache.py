@@ -31,9 +31,10 @@ from typing import Any
 import numpy as np
 
 from song.datasets.avatars.asset import AvatarAsset
+from song.datasets.scenes.ply import GaussianCloud
 from song.errors import FormatError
 from song.geometry.fk import skinning_transforms
-from song.geometry.lbs import SkinnedGaussians, accelerator, lbs, lbs_positions
+from song.geometry.lbs import SkinnedGaussians, accelerator, lbs, lbs_positions, lbs_rotations
 from song.geometry.rotations import quat_continuous, quat_normalize, quat_slerp
 from song.util import write_npz_atomic, write_npz_compressed_atomic
 
@@ -224,19 +225,32 @@ def load_materialized_cache(path: str | Path) -> MaterializedCache:
 
 @dataclass(frozen=True)
 class PosedAvatar:
-    """One pedestrian's avatar ready to pose: prepared Gaussians plus its motion cache."""
+    """One pedestrian's avatar ready to pose: prepared Gaussians plus its motion cache.
+
+    Attributes:
+        skin: the scaled canonical Gaussians prepared for LBS.
+        motion: the decoded compact cache.
+        gaussians: the scaled canonical Gaussians (their scales, opacities and colours are static).
+    """
 
     skin: SkinnedGaussians
     motion: MotionCache
+    gaussians: GaussianCloud
 
     @classmethod
     def load(cls, asset: AvatarAsset, cache: MotionCache) -> PosedAvatar:
         """Scale the asset as recorded in the cache and prepare it."""
-        return cls(skin_asset(asset.scaled(float(cache.meta.get("scale", 1.0)))), cache)
+        scaled = asset.scaled(float(cache.meta.get("scale", 1.0)))
+        return cls(skin_asset(scaled), cache, scaled.gaussians)
 
     def means_at(self, t: float) -> np.ndarray:
         """(G, 3) float32 posed Gaussian means at scenario time ``t`` (s)."""
         return lbs_positions(self.skin, self.motion.transforms_at(t))
+
+    def pose_at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Posed means (G, 3) and rotations (G, 4, wxyz) at scenario time ``t`` (s), by LBS."""
+        transforms = self.motion.transforms_at(t)
+        return lbs_positions(self.skin, transforms), lbs_rotations(self.skin, transforms)
 
 
 def pose_avatars(avatars: list[PosedAvatar], t: float) -> list[np.ndarray]:

@@ -149,6 +149,7 @@ class Benchmark:
             avatars=self._avatars(scene_id),
             factors=factors,
             params=self.params,
+            gaussians_path=self.blob(self._scenes[scene_id]["gaussians"]),
         )
 
 

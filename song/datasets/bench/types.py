@@ -122,6 +122,7 @@ class Episode:
         pedestrians: the scene's pedestrian tracks.
         avatars: avatar bindings, one per pedestrian that has one.
         params: the runtime parameters the episode is run with (the release's, unless overridden).
+        gaussians_path: the scene's Gaussian PLY inside the release, or None when it has none.
     """
 
     episode_id: str
@@ -142,6 +143,7 @@ class Episode:
     avatars: list[AvatarBinding] = field(default_factory=list)
     factors: dict[str, float] = field(default_factory=dict)
     params: RuntimeParams = field(default_factory=RuntimeParams)
+    gaussians_path: Path | None = None
 
 
 def pedestrian_states(tracks: list[PedestrianTrack], t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
