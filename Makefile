@@ -6,7 +6,8 @@ SONG := $(VENV)/bin/song
 STAMP := $(VENV)/.installed-stamp
 RUN ?= runs/demo
 BENCH ?= runs/demo-bench
-SCENES ?= datasets/sample_scenes
+SAMPLES ?= datasets/sample_scenes
+SCENES ?= runs/scenes
 
 .PHONY: setup demo test lint format bench clean
 
@@ -27,6 +28,8 @@ FIGURES ?= runs/demo-figures
 EPISODES ?= 120
 
 demo: setup
+	# the shipped samples carry geometry only; their Gaussian scenes are synthesised here (~2 s each)
+	$(SONG) scenes splat $(SAMPLES) --out $(SCENES)
 	$(SONG) scenes check $(SCENES)
 	$(SONG) synth --scenes $(SCENES) --out $(RUN) --workers 2
 	$(SONG) grade --run $(RUN) --episodes $(EPISODES) --workers 2

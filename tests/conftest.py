@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import functools
 import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -13,6 +15,40 @@ from song.datasets.scenes import Region, SceneObject, SemanticMap, write_scene_p
 from song.datasets.scenes.model import OccupancySpec
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+SHARED_HOUSES = SHARED / "sample_scenes" / "procthor_houses"  # three real ProcTHOR houses (Apache-2.0)
+GUITAR = SHARED / "sample_scenes" / "playcanvas_splat" / "guitar.compressed.ply"  # a real SuperSplat file
+BIKER = SHARED / "sample_scenes" / "playcanvas_splat" / "biker.compressed.ply"
+
+
+def shared_file(path: Path) -> Path:
+    """``path`` under ../shared, or skip the test with the reason (a user's clone has no ../shared)."""
+    if not path.exists():
+        pytest.skip(f"{path} is absent: third-party fixtures live in ../shared beside the checkout")
+    return path
+
+
+@functools.lru_cache(maxsize=1)
+def splat_file() -> Path:
+    """A 90 k-splat compressed PLY (made once per session) for tests that damage a real-sized file."""
+    return synthetic_ply(Path(tempfile.mkdtemp(prefix="song-splat-")) / "splat.compressed.ply", 90_854)
+
+
+def synthetic_ply(path: Path, n: int = 5000, seed: int = 0) -> Path:
+    """A SuperSplat compressed PLY of ``n`` random splats written by our own writer."""
+    from song.datasets.scenes.ply import GaussianCloud, write_compressed_ply
+
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    cloud = GaussianCloud(
+        means=rng.uniform(-1, 1, (n, 3)).astype(np.float32),
+        quats=(q / np.linalg.norm(q, axis=1, keepdims=True)).astype(np.float32),
+        log_scales=rng.uniform(-5, -2, (n, 3)).astype(np.float32),
+        opacity_logits=rng.normal(0, 2, n).astype(np.float32),
+        sh_dc=rng.normal(0, 1, (n, 3)).astype(np.float32),
+    )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_compressed_ply(path, cloud)
+    return path
 
 
 def build_two_room_scene(root: Path, scene_id: str = "tiny", resolution: float = 0.05) -> Path:

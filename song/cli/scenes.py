@@ -10,6 +10,7 @@ from rich import box
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
 from song.datasets.scenes import find_scene_packages, load_scene_package
+from song.datasets.scenes.splat import SPACING_M
 from song.errors import SongError
 
 scenes_app = typer.Typer(help="Scene packages: validate, import, generate.", no_args_is_help=True)
@@ -64,12 +65,20 @@ def import_scenes(
     src: Path = typer.Argument(..., help="house JSON, a folder of them, or a .jsonl/.jsonl.gz"),
     out: Path = typer.Option(..., "--out", help="folder for the scene packages"),
     resolution: float = typer.Option(0.05, "--resolution", min=0.01, max=0.5, help="occupancy cell size, m"),
+    assets: Path | None = typer.Option(
+        None, "--assets", help="ProcTHOR asset database JSON (default: the procthor package's)"
+    ),
+    splat: bool = typer.Option(True, "--splat/--no-splat", help="also write the Gaussian scene (PLY)"),
+    spacing: float = typer.Option(SPACING_M, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m"),
 ) -> None:
     """Convert real layouts into scene packages; one bad house fails alone."""
     if kind == "procthor":
         from song.datasets.scenes.procthor import import_procthor
 
-        results = import_procthor(src, out, resolution=resolution)
+        results = import_procthor(src, out, resolution=resolution, assets=assets, splat=splat, spacing=spacing)
+        for result in results:
+            if result.warning:
+                console.print(f"[yellow]warning[/yellow] {result.warning}", soft_wrap=True)
     elif kind == "interiorgs":
         from song.datasets.scenes.interiorgs import import_interiorgs
 
@@ -88,9 +97,46 @@ def generate(
     count: int = typer.Option(..., "--count", min=1, help="number of scene packages"),
     out: Path = typer.Option(..., "--out", help="folder for the packages"),
     seed: int = typer.Option(0, "--seed", help="generator seed (same seed → identical bytes)"),
+    splat: bool = typer.Option(True, "--splat/--no-splat", help="also write the Gaussian scene (PLY)"),
+    spacing: float = typer.Option(SPACING_M, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m"),
 ) -> None:
     """Procedural venues (office, clinic, lobby, shop, restaurant, home, library) with all four files."""
     from song.datasets.scenes.generate import generate_scenes
 
-    paths = generate_scenes(count, seed, out)
+    paths = generate_scenes(count, seed, out, splat=splat, spacing=spacing)
     console.print(f"wrote {len(paths)} scene packages to {out}")
+
+
+@scenes_app.command("splat")
+@handle_errors
+def splat_command(
+    folder: Path = typer.Argument(..., help="a scene package, or a folder of them"),
+    out: Path | None = typer.Option(None, "--out", help="write complete copies here (default: in place)"),
+    spacing: float = typer.Option(SPACING_M, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m"),
+    force: bool = typer.Option(False, "--force", help="also replace Gaussian scenes that exist"),
+) -> None:
+    """Synthesise the Gaussian scene (and USD proxy) of packages that lack one, from their geometry."""
+    import shutil
+
+    from song.datasets.scenes.package import GAUSSIANS
+    from song.datasets.scenes.splat import dress_package
+
+    rows = []
+    for root in find_scene_packages(folder):
+        target = root
+        if out is not None:
+            target = out / root.name
+            if target.resolve() != root.resolve():
+                shutil.copytree(root, target, dirs_exist_ok=True)
+        if (target / GAUSSIANS).is_file() and not force:
+            rows.append({"scene": root.name, "status": "skipped", "gaussians": "exists"})
+            continue
+        try:
+            result = dress_package(target, spacing=spacing)
+        except SongError as exc:
+            rows.append({"scene": root.name, "status": "failed", "gaussians": str(exc)})
+            continue
+        rows.append({"scene": root.name, "status": "ok", "gaussians": f"{result.gaussians:,} ({result.ply_mb:.1f} MB)"})
+    console.print(status_table(f"scene Gaussians in {out or folder}", rows, ["scene", "status", "gaussians"]))
+    if any(r["status"] == "failed" for r in rows):
+        raise typer.Exit(1)

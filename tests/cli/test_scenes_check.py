@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -13,8 +12,7 @@ from song.cli import app
 from song.cli.common import console
 from song.datasets.scenes.ply import GaussianCloud, write_compressed_ply
 from song.datasets.scenes.usd import ProxyBox, write_usd_proxy
-
-GUITAR = Path(__file__).resolve().parents[1] / "data" / "playcanvas_splat" / "guitar.compressed.ply"
+from tests.conftest import splat_file
 
 
 def _run(folder: Path) -> tuple[int, str]:
@@ -53,8 +51,7 @@ def test_mixed_folder_reports_each_bad_package_and_fails(make_scene, tmp_path: P
     (bad_version / "semantic_map.json").write_text(json.dumps(data))
     (make_scene("no_occupancy") / "occupancy.png").unlink()
     truncated = make_scene("bad_ply")
-    shutil.copy(GUITAR, truncated / "3dgs_compressed.ply")
-    (truncated / "3dgs_compressed.ply").write_bytes(GUITAR.read_bytes()[:100_000])
+    (truncated / "3dgs_compressed.ply").write_bytes(splat_file().read_bytes()[:100_000])
     (good_a.parent / "notes.txt").write_text("not a package")  # plain files are ignored
 
     code, out = _run(good_a.parent)

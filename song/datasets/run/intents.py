@@ -65,6 +65,9 @@ class IntentSet(BaseModel):
     intents: list[Intent]
     rejected: list[RejectedIntent] = []
     llm_error: str = Field("", description="why the LLM path fell back to the offline model, if it did")
+    notes: list[str] = Field(
+        [], description="why the scene yields no (or fewer) pedestrians, when it is the scene's fault"
+    )
 
     def by_id(self) -> dict[int, Intent]:
         """Kept intents keyed by pedestrian id."""

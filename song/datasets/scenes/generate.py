@@ -5,8 +5,9 @@ entrance at its west end, and rooms on both sides, each opening onto the corrido
 0.8–1.6 m wide (open venues such as lobbies, shops and restaurants get one large hall instead of the
 rooms on one side). Each room takes a role from the venue's programme (reception, open office,
 consultation room, ...) and is furnished with named functional objects placed away from doorways.
-Every package gets all four files: semantic map, occupancy, a compressed Gaussian PLY of floor,
-walls and furniture, and a USD collision proxy. The same seed gives byte-identical packages.
+Every package gets all four files: semantic map, occupancy, the Gaussian scene and the USD proxy, both
+from the scene's dressing (:mod:`song.datasets.scenes.splat`; the doorways travel as dressing hints).
+The same seed gives byte-identical packages.
 """
 
 from __future__ import annotations
@@ -17,11 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from song.config import CrowdConfig
+from song.datasets.scenes.dressing import DressingHints, Opening
 from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
-from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, write_scene_package
-from song.datasets.scenes.ply import SH_C0, GaussianCloud, write_compressed_ply
+from song.datasets.scenes.package import write_scene_package
 from song.datasets.scenes.raster import Rasterizer
-from song.datasets.scenes.usd import ProxyBox, write_usd_proxy
+from song.datasets.scenes.splat import SPACING_M, dress_package, write_proxy
 from song.geometry.freespace import components, erode
 from song.util import derive_rng
 
@@ -29,6 +30,8 @@ RESOLUTION = 0.05
 OUTER_WALL_M = 0.15
 INNER_WALL_M = 0.1
 WALL_HEIGHT_M = 2.6
+DOOR_HEIGHT_M = 2.1  # top of the doorways
+ENTRANCE_HEIGHT_M = 2.4  # top of the building entrance
 BODY_RADIUS_M = CrowdConfig().agent_radius_m  # the generated layout must be one walkable part for a body this wide
 DOOR_CLEAR_M = 0.9  # objects keep this far from a doorway's centre line
 
@@ -226,63 +229,26 @@ def _place_items(
     return out
 
 
-def _surface_cloud(width: float, height: float, walls: list[ProxyBox], furniture: list[ProxyBox], rng) -> GaussianCloud:
-    """Coloured Gaussians on the floor, the walls and the furniture boxes."""
-    parts, colours, scales = [], [], []
-    gx, gy = np.meshgrid(np.arange(0.15, width, 0.3), np.arange(0.15, height, 0.3))
-    floor = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
-    parts.append(floor)
-    colours.append(np.tile([0.78, 0.74, 0.68], (len(floor), 1)) + rng.normal(0, 0.02, (len(floor), 3)))
-    scales.append(np.tile([0.15, 0.15, 0.01], (len(floor), 1)))
-    for boxes, base, step in ((walls, [0.92, 0.91, 0.88], 0.2), (furniture, [0.55, 0.42, 0.3], 0.12)):
-        for box in boxes:
-            fp = box.footprint
-            for a, b in zip(fp, np.roll(fp, -1, axis=0), strict=True):
-                length = np.linalg.norm(b - a)
-                s = np.arange(step / 2, length, step) / max(length, 1e-9)
-                z = np.arange(box.z_min + step / 2, box.z_max, step)
-                if len(s) == 0 or len(z) == 0:
-                    continue
-                ss, zz = np.meshgrid(s, z)
-                pts = np.column_stack(
-                    [a[0] + (b[0] - a[0]) * ss.ravel(), a[1] + (b[1] - a[1]) * ss.ravel(), zz.ravel()]
-                )
-                parts.append(pts)
-                tint = np.array(base) + rng.normal(0, 0.04, 3)
-                colours.append(np.tile(tint, (len(pts), 1)))
-                scales.append(np.tile([step / 2, step / 2, step / 2], (len(pts), 1)))
-    means = np.vstack(parts)
-    order = np.lexsort((means[:, 2], np.floor(means[:, 1]), np.floor(means[:, 0])))  # metre cells: tight chunks
-    means = means[order]
-    n = len(means)
-    return GaussianCloud(
-        means=means.astype(np.float32),
-        quats=np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
-        log_scales=np.log(np.vstack(scales)[order]).astype(np.float32),
-        opacity_logits=np.full(n, 3.0, np.float32),
-        sh_dc=((np.clip(np.vstack(colours)[order], 0, 1) - 0.5) / SH_C0).astype(np.float32),
-    )
+def _wall(raster: Rasterizer, a, b, thickness: float) -> None:
+    """Draw a wall strip into the occupancy image."""
+    raster.segment(np.array(a, float), np.array(b, float), thickness, 0)
 
 
-def _wall(raster: Rasterizer, walls: list[ProxyBox], a, b, thickness: float, name: str) -> None:
-    """Draw a wall strip and record its collision box."""
-    a, b = np.array(a, float), np.array(b, float)
-    raster.segment(a, b, thickness, 0)
-    d = b - a
-    n = np.array([-d[1], d[0]]) / max(np.linalg.norm(d), 1e-9) * thickness / 2
-    walls.append(ProxyBox(name, np.round(np.array([a - n, b - n, b + n, a + n]), 3), 0.0, WALL_HEIGHT_M))
+def generate_scene(
+    scene_id: str, venue: str, seed: int, out_dir: str | Path, splat: bool = True, spacing: float = SPACING_M
+) -> Path:
+    """One procedural package ``out_dir/scene_id`` for ``venue``; deterministic in (seed, scene_id).
 
-
-def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) -> Path:
-    """One procedural package ``out_dir/scene_id`` for ``venue``; deterministic in (seed, scene_id)."""
+    The USD proxy is always written (it carries the doorways as dressing hints); the Gaussian scene
+    too unless ``splat`` is False (``song scenes splat`` can add it later, identically).
+    """
     for attempt in range(8):
         rng = derive_rng(seed, scene_id, "generate", attempt)
         width, height, (cy0, cy1), rooms = _layout(venue, rng)
         raster = Rasterizer((0.0, 0.0), (width, height), RESOLUTION, fill=255)
-        walls: list[ProxyBox] = []
 
-        def wall(a, b, thickness, name, raster=raster, walls=walls):
-            _wall(raster, walls, a, b, thickness, name)
+        def wall(a, b, thickness, name, raster=raster):
+            _wall(raster, a, b, thickness)
 
         t = OUTER_WALL_M / 2
         wall((t, t), (width - t, t), OUTER_WALL_M, "outer_south")
@@ -308,7 +274,7 @@ def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) ->
                 far = room.rect[1] if wy == cy1 else room.rect[3]
                 wall((x1 + INNER_WALL_M / 2, wy), (x1 + INNER_WALL_M / 2, far), INNER_WALL_M, f"wall_{k}_side")
         placed: list[np.ndarray] = []
-        objects, furniture, counts = [], [], {}
+        objects, counts = [], {}
         regions = [
             Region(
                 id="corridor",
@@ -316,6 +282,15 @@ def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) ->
                 name="corridor",
                 polygon=[(0.0, cy0), (width, cy0), (width, cy1), (0.0, cy1)],
             )
+        ]
+        openings = [Opening((t, ey - entrance_w / 2), (t, ey + entrance_w / 2), ENTRANCE_HEIGHT_M, OUTER_WALL_M)] + [
+            Opening(
+                (r.door[0] - r.door[2] / 2, r.door[1]),
+                (r.door[0] + r.door[2] / 2, r.door[1]),
+                DOOR_HEIGHT_M,
+                INNER_WALL_M,
+            )
+            for r in rooms
         ]
         for k, room in enumerate(rooms):
             rid = f"{room.kind}_{k + 1}"
@@ -338,7 +313,6 @@ def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) ->
                     )
                 )
                 raster.polygon(corners, 0)
-                furniture.append(ProxyBox(oid, corners, 0.0, h))
         ex = OUTER_WALL_M + 0.05
         objects.append(
             SceneObject(
@@ -372,14 +346,24 @@ def generate_scene(scene_id: str, venue: str, seed: int, out_dir: str | Path) ->
         objects=objects,
     )
     root = write_scene_package(Path(out_dir) / scene_id, smap, cells)
-    write_compressed_ply(root / GAUSSIANS, _surface_cloud(width, height, walls, furniture, rng))
-    write_usd_proxy(root / USD_PROXY, walls + furniture)
+    hints = DressingHints(openings=tuple(openings), ceiling_height_m=WALL_HEIGHT_M)
+    if splat:
+        dress_package(root, hints, spacing, seed)
+    else:
+        write_proxy(root, hints, seed)
     return root
 
 
-def generate_scenes(count: int, seed: int, out_dir: str | Path, venues: tuple[str, ...] = VENUE_ORDER) -> list[Path]:
+def generate_scenes(
+    count: int,
+    seed: int,
+    out_dir: str | Path,
+    venues: tuple[str, ...] = VENUE_ORDER,
+    splat: bool = True,
+    spacing: float = SPACING_M,
+) -> list[Path]:
     """``count`` packages cycling through ``venues`` (ids ``<venue>_<k>``)."""
     return [
-        generate_scene(f"{venues[k % len(venues)]}_{k:04d}", venues[k % len(venues)], seed, out_dir)
+        generate_scene(f"{venues[k % len(venues)]}_{k:04d}", venues[k % len(venues)], seed, out_dir, splat, spacing)
         for k in range(count)
     ]

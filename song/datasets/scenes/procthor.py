@@ -9,8 +9,14 @@ above); in our frame an object's forward axis is (sin ψ, cos ψ) and its right 
 Walls are zero-thickness planes (an interior wall appears once per side); they become occupied strips
 ``wall_thickness_m`` thick centred on the plane. Door holes (``holePolygon``, wall-local x = distance
 from the wall's first end) are cut back open across the strip so rooms connect. Floor objects (bottom
-within 0.15 m of the floor) get footprints from the asset size table; wall-mounted and small objects
-on furniture are skipped. Everything outside the rooms is occupied.
+within 0.15 m of the floor) get footprints from ProcTHOR's asset database (the ``procthor`` package's
+``databases/asset-database.json``, or a file the user names); wall-mounted and small objects on
+furniture are skipped, and objects whose asset is missing from the database are counted and reported
+per house (never silently). Everything outside the rooms is occupied.
+
+The importer also dresses the house (:mod:`song.datasets.scenes.splat`): its doors become openings
+(lintels above the hole), its rooms' floor materials and wall paint map to ours, its wall height is
+the ceiling; the USD proxy and the Gaussian scene are written with the package.
 """
 
 from __future__ import annotations
@@ -26,15 +32,29 @@ from typing import Any
 
 import numpy as np
 
+from song.datasets.scenes.dressing import DressingHints, Opening
+from song.datasets.scenes.materials import procthor_floor_material
 from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
 from song.datasets.scenes.package import write_scene_package
 from song.datasets.scenes.raster import Rasterizer
+from song.datasets.scenes.splat import SPACING_M, dress_package, write_proxy
 from song.errors import SceneError, SongError
 
 FLOOR_OBJECT_MAX_BOTTOM_M = 0.15
 MIN_FOOTPRINT_M = 0.15  # smaller floor objects (bins, plungers) are not navigation obstacles
 MARGIN_M = 0.3
 CATEGORIES = {
+    "Television": "appliance",
+    "FloorLamp": "decor",
+    "HousePlant": "decor",
+    "GarbageCan": "fixture",
+    "Ottoman": "seating",
+    "Stool": "seating",
+    "Safe": "storage",
+    "LaundryHamper": "storage",
+    "Microwave": "appliance",
+    "WashingMachine": "appliance",
+    "ClothesDryer": "appliance",
     "Bed": "furniture",
     "Sofa": "seating",
     "ArmChair": "seating",
@@ -70,20 +90,70 @@ def unity_yaw_axes(yaw_deg: float) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class ImportResult:
-    """One imported house: its package folder, or the error that stopped it."""
+    """One imported house: its package folder (or the error that stopped it) and its unsized objects."""
 
     scene_id: str
     path: Path | None
     error: str = ""
+    unsized: int = 0  # floor-level objects whose asset is missing from the database (skipped)
+
+    @property
+    def warning(self) -> str:
+        """A one-line warning when objects could not be sized, else ""."""
+        if not self.unsized:
+            return ""
+        return f"{self.scene_id}: {self.unsized} object(s) skipped: their assets are not in the asset database"
 
 
-def load_asset_table(path: Path | None = None) -> dict[str, Any]:
-    """The asset size table (the shipped one by default)."""
+ASSET_DB = "databases/asset-database.json"
+
+
+def load_asset_table(path: str | Path | None = None) -> dict[str, Any]:
+    """``{assetId: {"objectType", "boundingBox"}}`` from ProcTHOR's asset database.
+
+    Args:
+        path: a database file -- ProcTHOR's format (``{objectType: [asset, ...]}``) or the flat
+            ``{assetId: {objectType, boundingBox}}`` form; default the ``procthor`` package's own.
+
+    Raises:
+        MissingDependencyError: no ``path`` and the ``procthor`` package is not installed.
+        SceneError: the file cannot be read or has neither form.
+    """
     if path is None:
-        text = resources.files("song.datasets.scenes").joinpath("data/procthor_asset_bboxes.json").read_text()
+        try:
+            source = resources.files("procthor").joinpath(ASSET_DB)
+            text = source.read_text(encoding="utf-8")
+        except (ModuleNotFoundError, FileNotFoundError) as exc:
+            from song.errors import MissingDependencyError
+
+            raise MissingDependencyError("procthor", "procthor") from exc
+        where = f"procthor/{ASSET_DB}"
     else:
-        text = Path(path).read_text(encoding="utf-8")
-    return json.loads(text)
+        where = str(path)
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SceneError(path, "", f"cannot read the asset database: {exc}") from exc
+    try:
+        data = json.loads(text)
+    except ValueError as exc:
+        raise SceneError(where, "", f"asset database is not JSON: {exc}") from exc
+    if not isinstance(data, dict):
+        raise SceneError(where, "", "asset database must be a JSON object")
+    table: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, list):  # ProcTHOR's own form: objectType -> assets
+            for asset in value:
+                if isinstance(asset, dict) and "assetId" in asset and "boundingBox" in asset:
+                    table[asset["assetId"]] = {
+                        "objectType": asset.get("objectType", key),
+                        "boundingBox": asset["boundingBox"],
+                    }
+        elif isinstance(value, dict) and "boundingBox" in value:
+            table[key] = value
+    if not table:
+        raise SceneError(where, "", "no assets with a boundingBox found")
+    return table
 
 
 def _snake(name: str) -> str:
@@ -130,8 +200,65 @@ def _wall_ends(wall_id: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array([x0, z0]), np.array([x1, z1])
 
 
-def convert_house(house: dict, scene_id: str, assets: dict[str, Any], resolution: float, wall: float, where: str):
-    """A ProcTHOR house dict → (SemanticMap, occupancy cells)."""
+@dataclass(frozen=True)
+class ConvertedHouse:
+    """A house as a package: semantic map, occupancy cells, dressing hints, unsized object count."""
+
+    semantic_map: SemanticMap
+    cells: np.ndarray
+    hints: DressingHints
+    unsized: int
+
+
+WALL_TINT_MIX = 0.5  # ProcTHOR's wall colours tint a lit white texture; mixed halfway to white they read as paint
+
+
+def _rgb_hex(colour: dict) -> str:
+    values = [WALL_TINT_MIX + (1 - WALL_TINT_MIX) * float(colour.get(k, 0.8)) for k in ("r", "g", "b")]
+    r, g, b = (min(255, max(0, int(round(255 * v)))) for v in values)
+    return f"paint:#{r:02x}{g:02x}{b:02x}"
+
+
+def _hints(house: dict, room_ids: dict[str, str], wall: float) -> DressingHints:
+    """Openings from the doors, floor materials per room, the most common wall paint, the wall height."""
+    openings = []
+    seen = set()
+    for door in house.get("doors", []):
+        wall_id = door.get("wall0") or door.get("wall1")
+        hole = door.get("holePolygon") or []
+        if not wall_id or len(hole) < 2 or door.get("id") in seen:
+            continue
+        seen.add(door.get("id"))
+        a, b = _wall_ends(wall_id)
+        direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
+        lo, hi = sorted((float(hole[0]["x"]), float(hole[1]["x"])))
+        top = max(float(hole[0].get("y", 2.1)), float(hole[1].get("y", 2.1)))
+        openings.append(Opening(tuple(a + direction * lo), tuple(a + direction * hi), top, wall))
+    floors = {
+        room_ids[room["id"]]: procthor_floor_material(room.get("floorMaterial", {}).get("name", ""))
+        for room in house.get("rooms", [])
+        if room.get("id") in room_ids
+    }
+    paints = [
+        _rgb_hex(w["material"]["color"])
+        for w in house.get("walls", [])
+        if isinstance(w.get("material", {}).get("color"), dict)
+    ]
+    heights = [
+        float(p["y"]) for w in house.get("walls", []) for p in w.get("polygon", []) if isinstance(p, dict) and "y" in p
+    ]
+    return DressingHints(
+        openings=tuple(openings),
+        floor_materials=floors,
+        wall_material=max(set(paints), key=paints.count) if paints else None,
+        ceiling_height_m=round(max(heights), 3) if heights else None,
+    )
+
+
+def convert_house(
+    house: dict, scene_id: str, assets: dict[str, Any], resolution: float, wall: float, where: str
+) -> ConvertedHouse:
+    """A ProcTHOR house dict → a :class:`ConvertedHouse`."""
     try:
         rooms = _room_polygons(house)
     except (KeyError, TypeError, ValueError) as exc:
@@ -167,16 +294,17 @@ def convert_house(house: dict, scene_id: str, assets: dict[str, Any], resolution
         regions.append(
             Region(id=rid, type=_snake(room["roomType"]), name=ROOM_NAMES.get(room["roomType"]), polygon=poly)
         )
-    objects, counters = [], {}
+    objects, counters, unsized = [], {}, 0
     from shapely.geometry import Point, Polygon
 
     shapes = {rid: Polygon(rooms[k]) for k, rid in room_ids.items()}
     for obj in house.get("objects", []):
         asset = assets.get(obj.get("assetId", ""))
+        pos = obj["position"]
         if asset is None:
+            unsized += float(pos.get("y", 0.0)) < 1.0  # floor-level objects we could not size
             continue
         box = asset["boundingBox"]
-        pos = obj["position"]
         if pos["y"] - box["y"] / 2 > FLOOR_OBJECT_MAX_BOTTOM_M or max(box["x"], box["z"]) < MIN_FOOTPRINT_M:
             continue
         centre = np.array([pos["x"], pos["z"]])
@@ -212,7 +340,7 @@ def convert_house(house: dict, scene_id: str, assets: dict[str, Any], resolution
         regions=regions,
         objects=objects,
     )
-    return smap, raster.cells
+    return ConvertedHouse(smap, raster.cells, _hints(house, room_ids, wall), unsized)
 
 
 def import_procthor(
@@ -221,8 +349,14 @@ def import_procthor(
     resolution: float = 0.05,
     wall_thickness: float = 0.1,
     assets: Path | None = None,
+    splat: bool = True,
+    spacing: float = SPACING_M,
 ) -> list[ImportResult]:
-    """Import every house under ``src`` into ``out_dir/<procthor_name>/``; a bad house fails alone."""
+    """Import every house under ``src`` into ``out_dir/<procthor_name>/``; a bad house fails alone.
+
+    Each package gets its USD proxy (with the house's dressing hints) and, unless ``splat`` is False,
+    its Gaussian scene.
+    """
     src, out_dir = Path(src), Path(out_dir)
     table = load_asset_table(assets)
     results = []
@@ -231,8 +365,13 @@ def import_procthor(
         try:
             if isinstance(house, Exception):
                 raise house
-            smap, cells = convert_house(house, scene_id, table, resolution, wall_thickness, str(src))
-            results.append(ImportResult(scene_id, write_scene_package(out_dir / scene_id, smap, cells)))
+            house_pkg = convert_house(house, scene_id, table, resolution, wall_thickness, str(src))
+            root = write_scene_package(out_dir / scene_id, house_pkg.semantic_map, house_pkg.cells)
+            if splat:
+                dress_package(root, house_pkg.hints, spacing)
+            else:
+                write_proxy(root, house_pkg.hints)
+            results.append(ImportResult(scene_id, root, unsized=house_pkg.unsized))
         except SongError as exc:
             results.append(ImportResult(scene_id, None, str(exc)))
         except (KeyError, TypeError, ValueError, IndexError) as exc:

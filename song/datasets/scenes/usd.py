@@ -1,8 +1,12 @@
-"""USD collision proxy ``scene_flat.usda`` (DESIGN §4.3): Z-up, metres, /World/collision meshes.
+"""USD proxy ``scene_flat.usda`` (DESIGN §4.3): Z-up, metres.
 
-Each :class:`ProxyBox` (a wall segment or a furniture box: a vertical prism over a CCW footprint)
-becomes one ``UsdGeom.Mesh`` with 8 points and 12 triangles under ``/World/collision``. usd-core
-(``pxr``) is imported lazily; without it a :class:`MissingDependencyError` names the extra.
+``/World/collision`` holds the obstacles as ``UsdGeom.Mesh`` prims -- walls, furniture parts, lintels --
+each a closed solid; ``/World/surfaces`` holds the floor and the ceiling (flat meshes). A
+:class:`ProxyBox` (a vertical prism over a CCW footprint) becomes 8 points and 12 triangles; any other
+solid comes as a :class:`ProxyMesh`. The layer's ``customLayerData`` may carry ``song_dressing``: the
+JSON of :class:`song.datasets.scenes.dressing.DressingHints` (what the scene's source knew: openings,
+materials, ceiling height). usd-core (``pxr``) is imported lazily; without it a
+:class:`MissingDependencyError` names the extra.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import numpy as np
 from song.errors import FormatError, MissingDependencyError
 from song.util import write_text_atomic
 
+DRESSING_KEY = "song_dressing"
 # two triangles per side face + top + bottom, for points 0..3 at z_min and 4..7 at z_max
 PRISM_FACES = np.array(
     [
@@ -90,16 +95,47 @@ def _check_box(index: int, box: ProxyBox) -> np.ndarray:
     return fp
 
 
-def write_usd_proxy(path: str | Path, boxes: list[ProxyBox]) -> None:
-    """Write ``scene_flat.usda`` (metersPerUnit 1, upAxis Z) with one mesh per box, atomically.
+def box_mesh(index: int, box: ProxyBox) -> ProxyMesh:
+    """The closed triangle mesh of a :class:`ProxyBox` (outward faces)."""
+    fp = _check_box(index, box)
+    points = np.vstack([np.column_stack([fp, np.full(4, box.z_min)]), np.column_stack([fp, np.full(4, box.z_max)])])
+    return ProxyMesh(box.name, points, PRISM_FACES.copy())
+
+
+def _define_mesh(stage, UsdGeom, Vt, prim_path: str, mesh: ProxyMesh) -> None:
+    points = np.asarray(mesh.vertices, dtype=np.float32)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    if len(points) == 0 or not np.isfinite(points).all() or len(faces) == 0:
+        raise ValueError(f"mesh '{mesh.name}': needs finite points and at least one face")
+    prim = UsdGeom.Mesh.Define(stage, prim_path)
+    prim.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points))
+    prim.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(faces)))
+    prim.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
+    prim.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    prim.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([points.min(axis=0), points.max(axis=0)])))
+
+
+def write_usd_proxy(
+    path: str | Path,
+    solids: list[ProxyBox | ProxyMesh],
+    surfaces: list[ProxyMesh] = (),
+    dressing_json: str | None = None,
+) -> None:
+    """Write ``scene_flat.usda`` (metersPerUnit 1, upAxis Z), atomically.
 
     The text is exported from an in-memory stage and written with an atomic rename; it depends only
-    on ``boxes`` (names, footprints, heights; float32 points), so the same boxes give the same bytes.
-    Prim names are USD identifiers derived from the box names, made unique with ``_2``, ``_3`` ...
+    on the inputs (names, float32 points, faces, the hints text), so the same scene gives the same bytes.
+    Prim names are USD identifiers derived from the given names, made unique with ``_2``, ``_3`` ...
+
+    Args:
+        path: the file to write.
+        solids: obstacles (``/World/collision``): boxes or closed meshes.
+        surfaces: floor and ceiling meshes (``/World/surfaces``).
+        dressing_json: :class:`~song.datasets.scenes.dressing.DressingHints` JSON for the layer metadata.
 
     Raises:
         MissingDependencyError: usd-core is not installed.
-        ValueError: a box is not a (4, 2) finite footprint with z_max > z_min.
+        ValueError: a box is not a (4, 2) finite footprint with z_max > z_min, or a mesh is empty.
     """
     Sdf, Usd, UsdGeom, Vt = _pxr()
     stage = Usd.Stage.CreateInMemory()
@@ -107,21 +143,40 @@ def write_usd_proxy(path: str | Path, boxes: list[ProxyBox]) -> None:
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
+    if dressing_json is not None:
+        stage.GetRootLayer().customLayerData = {DRESSING_KEY: dressing_json}
     UsdGeom.Scope.Define(stage, "/World/collision")
     used: set[str] = set()
-    for index, box in enumerate(boxes):
-        fp = _check_box(index, box)
-        points = np.vstack([np.column_stack([fp, np.full(4, box.z_min)]), np.column_stack([fp, np.full(4, box.z_max)])])
-        mesh = UsdGeom.Mesh.Define(stage, f"/World/collision/{_identifier(box.name, used)}")
-        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points.astype(np.float32)))
-        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(PRISM_FACES)))
-        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(PRISM_FACES.ravel().tolist()))
-        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-        lo, hi = points.min(axis=0).astype(np.float32), points.max(axis=0).astype(np.float32)
-        mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi])))
+    for index, solid in enumerate(solids):
+        mesh = box_mesh(index, solid) if isinstance(solid, ProxyBox) else solid
+        _define_mesh(stage, UsdGeom, Vt, f"/World/collision/{_identifier(mesh.name, used)}", mesh)
+    if surfaces:
+        UsdGeom.Scope.Define(stage, "/World/surfaces")
+        for mesh in surfaces:
+            _define_mesh(stage, UsdGeom, Vt, f"/World/surfaces/{_identifier(mesh.name, used)}", mesh)
     text = stage.GetRootLayer().ExportToString()
-    text = re.sub(r'\n    doc = "[^"]*"\n', "\n", text)  # no tool banner: bytes depend on the boxes only
+    text = re.sub(r'\n    doc = "[^"]*"\n', "\n", text)  # no tool banner: bytes depend on the inputs only
     write_text_atomic(path, text)
+
+
+def read_usd_dressing(path: str | Path) -> str | None:
+    """The ``song_dressing`` JSON text of a proxy's layer metadata, or None when it has none."""
+    Sdf, Usd, UsdGeom, Vt = _pxr()
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    if layer is None:
+        raise FormatError(path, "", "not a readable USD layer")
+    value = dict(layer.customLayerData).get(DRESSING_KEY)
+    return str(value) if value is not None else None
+
+
+def read_usd_surfaces(path: str | Path) -> list[ProxyMesh]:
+    """The meshes under ``/World/surfaces`` (floor and ceiling), faces triangulated; [] when absent."""
+    Sdf, Usd, UsdGeom, Vt = _pxr()
+    stage = Usd.Stage.Open(str(path))
+    root = stage.GetPrimAtPath("/World/surfaces") if stage is not None else None
+    if root is None or not root.IsValid():
+        return []
+    return [_read_mesh(Path(path), prim, UsdGeom.Mesh(prim)) for prim in root.GetChildren() if prim.IsA(UsdGeom.Mesh)]
 
 
 def read_usd_proxy(path: str | Path) -> list[ProxyMesh]:

@@ -40,6 +40,8 @@ def _pair_geodesics(
     walk: Walkable, snaps: dict[str, np.ndarray], rng: np.random.Generator
 ) -> dict[tuple[str, str], float]:
     ids = sorted(snaps)
+    if len(ids) < 2:
+        return {}
     sources = (
         ids if len(ids) <= MAX_SOURCE_OBJECTS else sorted(rng.choice(ids, MAX_SOURCE_OBJECTS, replace=False).tolist())
     )
@@ -185,6 +187,10 @@ def generate_intents(
     snaps = {k: v for k, v in snaps.items() if len(v)}
     n = pedestrian_count(walk.area_m2, config)
     geodesic = _pair_geodesics(walk, snaps, rng)
+    notes = scene_notes(package, walk, snaps, geodesic)
+    if notes:  # nothing a pedestrian could do here: record why instead of asking a model
+        provenance = Provenance(provider="offline", model=OfflineIntentModel().model)
+        return IntentSet(scene_id=package.scene_id, provenance=provenance, intents=[], notes=notes)
     provider = choose_provider(config.intents.llm)
     description, llm_error = "", ""
     offline = OfflineIntentModel()
@@ -209,7 +215,21 @@ def generate_intents(
         intents=kept,
         rejected=rejected,
         llm_error=llm_error,
+        notes=[] if kept else ["no proposed routine passed the filters (see rejected)"],
     )
+
+
+def scene_notes(package: ScenePackage, walk: Walkable, snaps: dict, geodesic: dict) -> list[str]:
+    """Why a scene cannot hold any routine (empty when it can): the first missing ingredient."""
+    if walk.area_m2 <= 0.0:
+        return [f"no walkable area for a {walk.radius:.2f} m body"]
+    if len(package.semantic_map.objects) < 2:
+        return [f"{len(package.semantic_map.objects)} object(s): a routine needs a start and a goal object"]
+    if len(snaps) < 2:
+        return [f"{len(snaps)} object(s) with a free standing point next to them (need 2)"]
+    if not geodesic:
+        return ["no two objects are connected by walkable space"]
+    return []
 
 
 def run_intents(ctx: StageContext) -> list[str]:

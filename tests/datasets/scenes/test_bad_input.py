@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 from song.cli import app
 from song.datasets.scenes import load_scene_package
 from song.errors import SceneError
+from tests.conftest import splat_file
 
 
 def _edit_map(fn: Callable[[dict], None]) -> Callable[[Path], None]:
@@ -50,16 +51,15 @@ def _write(name: str, data: bytes) -> Callable[[Path], None]:
     return lambda root: (root / name).write_bytes(data)
 
 
-GUITAR = Path(__file__).resolve().parents[2] / "data" / "playcanvas_splat" / "guitar.compressed.ply"
 PLY = "3dgs_compressed.ply"
 USD = "scene_flat.usda"
 
 
 def _ply(edit: Callable[[dict], None]) -> Callable[[Path], None]:
-    """A package PLY made from the real SuperSplat file with its arrays edited."""
+    """A package PLY made from a real-sized compressed file with its arrays edited."""
 
     def apply(root: Path) -> None:
-        ply = PlyData.read(str(GUITAR))
+        ply = PlyData.read(str(splat_file()))
         arrays = {e.name: np.array(e.data) for e in ply.elements}
         edit(arrays)
         PlyData([PlyElement.describe(a, k) for k, a in arrays.items()], text=False).write(str(root / PLY))
@@ -140,7 +140,12 @@ CATALOGUE: list[tuple[str, Callable[[Path], None], str, str]] = [
         "self-intersecting",
     ),
     ("16-bit occupancy", _image(lambda c: c.astype(np.uint16) * 257), "occupancy.png", "8-bit"),
-    ("truncated ply", lambda r: (r / PLY).write_bytes(GUITAR.read_bytes()[:700_000]), f"{PLY}: vertex", "end-of-file"),
+    (
+        "truncated ply",
+        lambda r: (r / PLY).write_bytes(splat_file().read_bytes()[:700_000]),
+        f"{PLY}: vertex",
+        "end-of-file",
+    ),
     ("garbage ply", _write(PLY, b"PK\x03\x04 a zip, not a ply"), f"{PLY}: header", "not a readable PLY"),
     ("ply without splats", _write(PLY, EMPTY_PLY), f"{PLY}: vertex", "no splats"),
     ("ply chunk count", _ply(lambda a: a.update(chunk=a["chunk"][:-2])), f"{PLY}: chunk", "cannot hold"),

@@ -19,7 +19,7 @@ def _files(root: Path) -> dict[str, bytes]:
 
 
 def test_every_venue_is_valid_connected_and_complete(tmp_path: Path) -> None:
-    roots = generate_scenes(len(VENUE_ORDER), seed=3, out_dir=tmp_path / "a")
+    roots = generate_scenes(len(VENUE_ORDER), seed=3, out_dir=tmp_path / "a", spacing=0.07)
     assert {load_scene_package(r).semantic_map.venue_type for r in roots} == set(VENUE_ORDER)
     labels_by_venue = {}
     for root in roots:
@@ -32,12 +32,12 @@ def test_every_venue_is_valid_connected_and_complete(tmp_path: Path) -> None:
         x0, y0, x1, y1 = package.semantic_map.bounds
         assert 6 <= x1 - x0 <= 40 and 6 <= y1 - y0 <= 30
         cloud = read_gaussian_ply(root / "3dgs_compressed.ply")
-        assert 1000 < len(cloud) < 60_000
+        assert 40_000 < len(cloud) < 400_000  # a quarter of the default density at twice the spacing
         assert (cloud.means[:, 2] > -0.05).all() and (cloud.means[:, 2] < 2.7).all()
         meshes = read_usd_proxy(root / "scene_flat.usda")
         assert len(meshes) >= len(package.semantic_map.objects) - 1  # every furniture box + walls
         labels_by_venue[package.semantic_map.venue_type] = {o.label for o in package.semantic_map.objects}
-        assert (root / "3dgs_compressed.ply").stat().st_size < 2_000_000
+        assert (root / "3dgs_compressed.ply").stat().st_size < 20 * len(cloud)
     assert "reception desk" in labels_by_venue["office"] and "examination bed" in labels_by_venue["clinic"]
     assert labels_by_venue["library"] != labels_by_venue["restaurant"]
 
@@ -55,8 +55,7 @@ def test_doorways_have_realistic_widths(tmp_path: Path) -> None:
 
 
 def test_same_seed_identical_bytes(tmp_path: Path) -> None:
-    generate_scenes(3, seed=11, out_dir=tmp_path / "a")
-    generate_scenes(3, seed=11, out_dir=tmp_path / "b")
-    generate_scenes(3, seed=12, out_dir=tmp_path / "c")
+    for name, seed in (("a", 11), ("b", 11), ("c", 12)):
+        generate_scenes(3, seed=seed, out_dir=tmp_path / name, spacing=0.1)
     assert _files(tmp_path / "a") == _files(tmp_path / "b")
     assert _files(tmp_path / "a") != _files(tmp_path / "c")

@@ -15,13 +15,13 @@ from song.cli import app
 from song.datasets.scenes import load_scene_package
 from song.datasets.scenes.interiorgs import FRAME, import_interiorgs, interiorgs_to_world
 from song.datasets.scenes.procthor import import_procthor
-
-HOUSES = Path(__file__).resolve().parents[2] / "data" / "procthor_houses"
+from tests.conftest import SHARED_HOUSES as HOUSES
+from tests.conftest import shared_file
 
 
 def _fixture(tmp: Path) -> tuple[Path, Path]:
     """Write an InteriorGS-format folder from a ProcTHOR house package (our reading of the format)."""
-    source = import_procthor(HOUSES / "house_1.json", tmp / "pt")[0].path
+    source = import_procthor(shared_file(HOUSES) / "house_1.json", tmp / "pt", splat=False)[0].path
     package = load_scene_package(source)
     smap, grid = package.semantic_map, package.occupancy
     folder = tmp / "interiorgs" / "0001_839920"

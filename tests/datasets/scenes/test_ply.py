@@ -20,8 +20,8 @@ from song.datasets.scenes.ply import (
     write_standard_ply,
 )
 from song.errors import FormatError
+from tests.conftest import GUITAR, shared_file, splat_file
 
-GUITAR = Path(__file__).resolve().parents[2] / "data" / "playcanvas_splat" / "guitar.compressed.ply"
 PACKED = ("packed_position", "packed_rotation", "packed_scale", "packed_color")
 
 
@@ -47,6 +47,7 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def test_real_supersplat_file() -> None:
+    shared_file(GUITAR)
     assert check_gaussian_ply(GUITAR) == 90_854
     cloud = read_gaussian_ply(GUITAR)
     assert len(cloud) == 90_854 and PlyData.read(str(GUITAR))["chunk"].count == 355
@@ -62,6 +63,7 @@ def test_real_supersplat_file() -> None:
 
 
 def test_reencoding_the_supersplat_file_reproduces_its_words(tmp_path: Path) -> None:
+    shared_file(GUITAR)
     """Our quantiser is SuperSplat's: decode → encode in file order gives the same chunks and words."""
     write_compressed_ply(tmp_path / "again.ply", read_gaussian_ply(GUITAR))
     theirs, ours = PlyData.read(str(GUITAR)), PlyData.read(str(tmp_path / "again.ply"))
@@ -79,6 +81,7 @@ def test_reencoding_the_supersplat_file_reproduces_its_words(tmp_path: Path) -> 
 
 
 def test_supersplat_file_is_in_our_morton_order() -> None:
+    shared_file(GUITAR)
     cloud = read_gaussian_ply(GUITAR)
     p = cloud.means.astype(np.float64)
     cells = np.minimum(1023, (p - p.min(axis=0)) * 1024 / np.ptp(p, axis=0)).astype(np.uint32)
@@ -211,14 +214,14 @@ def test_bad_ply_names_file_and_element(tmp_path: Path, damage: str) -> None:
     path = tmp_path / "bad.ply"
     edit, where = DAMAGE[damage]
     if damage == "truncated":
-        data = GUITAR.read_bytes()
+        data = splat_file().read_bytes()
         path.write_bytes(data[: len(data) // 2])
     elif damage == "garbage":
         path.write_bytes(b"not a ply at all\x00\x01")
     elif damage == "no_vertex":
         path.write_bytes(b"ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n")
     elif edit:
-        _rewrite(GUITAR, path, edit)
+        _rewrite(splat_file(), path, edit)
     for reader in (read_gaussian_ply, check_gaussian_ply):
         with pytest.raises(FormatError) as info:
             reader(path)

@@ -14,8 +14,8 @@ from shapely.geometry import Polygon
 from song.datasets.scenes import load_scene_package
 from song.datasets.scenes.procthor import import_procthor, unity_to_world, unity_yaw_axes
 from song.geometry.freespace import components, erode
-
-HOUSES = Path(__file__).resolve().parents[2] / "data" / "procthor_houses"
+from tests.conftest import SHARED_HOUSES as HOUSES
+from tests.conftest import shared_file
 
 
 def test_frame_conversion_round_trip_and_handedness() -> None:
@@ -30,7 +30,7 @@ def test_frame_conversion_round_trip_and_handedness() -> None:
 @pytest.fixture(scope="module")
 def imported(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     out = tmp_path_factory.mktemp("procthor")
-    results = import_procthor(HOUSES, out)
+    results = import_procthor(shared_file(HOUSES), out, splat=False)
     assert [r.error for r in results] == ["", "", ""]
     return [r.path for r in results]
 
@@ -57,7 +57,7 @@ def test_rooms_connect_and_area_is_plausible(imported: list[Path]) -> None:
 
 
 def test_objects_lie_in_their_rooms_and_skip_wall_items(imported: list[Path]) -> None:
-    house = json.loads((HOUSES / "house_1.json").read_text())
+    house = json.loads((shared_file(HOUSES) / "house_1.json").read_text())
     package = load_scene_package(imported[0])
     regions = {r.id: Polygon(r.polygon) for r in package.semantic_map.regions}
     for obj in package.semantic_map.objects:
@@ -70,7 +70,7 @@ def test_objects_lie_in_their_rooms_and_skip_wall_items(imported: list[Path]) ->
 
 
 def test_jsonl_gz_batch_with_a_bad_house(tmp_path: Path) -> None:
-    good = (HOUSES / "house_6.json").read_text()
+    good = (shared_file(HOUSES) / "house_6.json").read_text()
     lines = [json.dumps(json.loads(good)), '{"rooms": "not a list"}']
     src = tmp_path / "houses.jsonl.gz"
     src.write_bytes(gzip.compress(("\n".join(lines) + "\n").encode()))

@@ -1,0 +1,383 @@
+"""Scene Gaussians synthesised from a scene's geometry (for scenes without a trained 3DGS).
+
+Every visible surface of the :class:`~song.datasets.scenes.dressing.Dressing` -- floor, walls up to the
+ceiling, ceiling, furniture parts, lintels and trims -- is covered with surfels on a jittered grid of
+``spacing`` metres: each Gaussian lies on its surface, its rotation aligns its local z with the surface
+normal, it is thin along the normal (6 % of the spacing) and 0.8 spacings wide across (so neighbours
+overlap and no hole opens even from 0.3 m away), and near-opaque (opacity 0.993). Faces smaller than the
+spacing get proportionally finer samples. Hidden faces (box bottoms on the floor, the back of open
+shelves, walls facing other walls) are skipped.
+
+Colour = procedural material texture (:mod:`song.datasets.scenes.materials`) × baked shading: a soft
+directional light from above (0.72 ambient + 0.28·max(0, n·L)) and ambient occlusion -- floors darken
+within ~25 cm of walls and furniture, walls near the floor, the ceiling and inside corners, furniture
+toward the floor and under raised parts. Gaussians are written in spatial order (half-metre cells), so
+the SuperSplat chunks of 256 are compact and a renderer culls them well. Deterministic in the scene and
+the seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from song.datasets.scenes.dressing import Dressing, DressingHints, build_dressing
+from song.datasets.scenes.furniture import Part
+from song.datasets.scenes.materials import texture
+from song.datasets.scenes.ply import SH_C0, GaussianCloud
+from song.geometry.freespace import clearance_field
+from song.util import derive_rng
+
+SPACING_M = 0.035  # default surfel spacing: ~300 k–1 M Gaussians for an indoor scene
+WIDTH_FACTOR = 0.8  # in-plane σ as a fraction of the local spacing
+THIN_FACTOR = 0.06  # σ along the normal as a fraction of the local spacing
+JITTER = 0.2  # sample positions jitter by this fraction of the spacing
+OPACITY_LOGIT = 5.0  # sigmoid(5) = 0.993
+LIGHT = np.array([0.35, 0.5, 0.79]) / np.linalg.norm([0.35, 0.5, 0.79])
+AMBIENT, DIFFUSE = 0.72, 0.28
+SORT_CELL_M = 0.5
+
+
+@dataclass
+class _Samples:
+    """Surface samples before colouring: positions, frames (t1, t2, n), in-plane scales, material names."""
+
+    pos: np.ndarray
+    t1: np.ndarray
+    t2: np.ndarray
+    n: np.ndarray
+    s1: np.ndarray
+    s2: np.ndarray
+    uv: np.ndarray
+    material: np.ndarray
+    ao: np.ndarray
+
+    @classmethod
+    def concat(cls, items: list[_Samples]) -> _Samples:
+        items = [i for i in items if len(i.pos)]
+        if not items:
+            z = np.zeros((0, 3))
+            return cls(z, z, z, z, np.zeros(0), np.zeros(0), np.zeros((0, 2)), np.zeros(0, object), np.zeros(0))
+        return cls(*(np.concatenate([getattr(i, f) for i in items]) for f in cls.__dataclass_fields__))
+
+
+def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples:
+    """Jittered grid samples on F planar rectangles ``origin + u·eu + v·ev`` (u ∈ [0, lu], v ∈ [0, lv]).
+
+    Args:
+        origin: (F, 3) corners.
+        eu: (F, 3) unit edge direction of u.
+        ev: (F, 3) unit edge direction of v (``eu × ev`` is the outward normal).
+        lu: (F,) edge lengths along u, m.
+        lv: (F,) edge lengths along v, m.
+        material: (F,) material names.
+        ao_floor: (F,) bool: darken toward the floor (vertical faces standing on it).
+        spacing: target sample spacing, m.
+        rng: jitter source.
+    """
+    f = len(lu)
+    if f == 0:
+        return _Samples.concat([])
+    su = np.minimum(spacing, np.maximum(lu / 3, spacing / 4))
+    sv = np.minimum(spacing, np.maximum(lv / 3, spacing / 4))
+    nu = np.maximum(1, np.round(lu / su)).astype(np.int64)
+    nv = np.maximum(1, np.round(lv / sv)).astype(np.int64)
+    counts = nu * nv
+    face = np.repeat(np.arange(f), counts)
+    k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    i, j = k // nv[face], k % nv[face]
+    du, dv = lu[face] / nu[face], lv[face] / nv[face]
+    u = (i + 0.5 + JITTER * rng.uniform(-1, 1, len(k))) * du
+    v = (j + 0.5 + JITTER * rng.uniform(-1, 1, len(k))) * dv
+    pos = origin[face] + u[:, None] * eu[face] + v[:, None] * ev[face]
+    normal = np.cross(eu, ev)[face]
+    ao = np.ones(len(k))
+    standing = ao_floor[face]
+    ao[standing] = 1.0 - 0.3 * np.exp(-pos[standing, 2] / 0.15)
+    down = normal[:, 2] < -0.5
+    ao[down] = 0.6  # undersides (table tops, shelves, lintels) face the floor
+    uv = np.column_stack([u + origin[face] @ np.array([1.0, 0.7, 0.3]), v + origin[face, 2]])
+    return _Samples(pos, eu[face], ev[face], normal, WIDTH_FACTOR * du, WIDTH_FACTOR * dv, uv, material[face], ao)
+
+
+def _box_faces(parts: list[Part]) -> tuple:
+    """The visible faces of box parts as arrays for :func:`_faces`."""
+    rows = []
+    for p in parts:
+        c, s = math.cos(p.yaw), math.sin(p.yaw)
+        ax, ay, az = np.array([c, s, 0.0]), np.array([-s, c, 0.0]), np.array([0.0, 0.0, 1.0])
+        hx, hy = p.half
+        centre = np.array([*p.centre, 0.0])
+        corner = centre - hx * ax - hy * ay + p.z0 * az  # the (−x, −y, bottom) corner
+        h = p.z1 - p.z0
+        on_floor = p.z0 < 0.01
+        faces = {
+            "top": (corner + h * az, ax, ay, 2 * hx, 2 * hy, False),
+            "bottom": (corner + 2 * hy * ay, ax, -ay, 2 * hx, 2 * hy, False),
+            "-y": (corner, ax, az, 2 * hx, h, on_floor),
+            "+y": (corner + 2 * hx * ax + 2 * hy * ay, -ax, az, 2 * hx, h, on_floor),
+            "+x": (corner + 2 * hx * ax, ay, az, 2 * hy, h, on_floor),
+            "-x": (corner + 2 * hy * ay, -ay, az, 2 * hy, h, on_floor),
+        }
+        for name, (o, eu, ev, lu, lv, standing) in faces.items():
+            if name not in p.hidden and lu > 1e-4 and lv > 1e-4:
+                rows.append((o, eu, ev, lu, lv, p.material, standing))
+    if not rows:
+        return (np.zeros((0, 3)),) * 3 + (np.zeros(0),) * 2 + (np.zeros(0, object), np.zeros(0, bool))
+    o, eu, ev, lu, lv, m, st = zip(*rows, strict=True)
+    return np.array(o), np.array(eu), np.array(ev), np.array(lu), np.array(lv), np.array(m, object), np.array(st)
+
+
+def _round_parts(parts: list[Part], spacing: float, rng) -> _Samples:
+    """Cylinders (side and top) and ellipsoids sampled on their surfaces."""
+    out = []
+    for p in parts:
+        rx, ry = p.half
+        cx, cy = p.centre
+        if p.kind == "cylinder":
+            perimeter = math.pi * (rx + ry)
+            na = max(8, int(round(perimeter / spacing)))
+            nh = max(1, int(round((p.z1 - p.z0) / spacing)))
+            a = (np.arange(na * nh) % na + 0.5) / na * 2 * math.pi
+            z = p.z0 + (np.arange(na * nh) // na + 0.5) / nh * (p.z1 - p.z0)
+            n = np.column_stack([np.cos(a) / rx, np.sin(a) / ry, np.zeros_like(a)])
+            n /= np.linalg.norm(n, axis=1, keepdims=True)
+            pos = np.column_stack([cx + rx * np.cos(a), cy + ry * np.sin(a), z])
+            t2 = np.tile([0.0, 0.0, 1.0], (len(a), 1))
+            s = np.full(len(a), WIDTH_FACTOR * min(spacing, perimeter / na))
+            ao = 1.0 - 0.3 * np.exp(-z / 0.15)
+            out.append(
+                _Samples(
+                    pos,
+                    np.cross(t2, n),
+                    t2,
+                    n,
+                    s,
+                    s,
+                    np.column_stack([a * rx, z]),
+                    np.full(len(a), p.material, object),
+                    ao,
+                )
+            )
+            top = _faces(
+                np.array([[cx - rx, cy - ry, p.z1]]), np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]),
+                np.array([2 * rx]), np.array([2 * ry]), np.array([p.material], object), np.array([False]), spacing, rng,
+            )  # fmt: skip
+            inside = ((top.pos[:, 0] - cx) / rx) ** 2 + ((top.pos[:, 1] - cy) / ry) ** 2 <= 1
+            out.append(_Samples(*(getattr(top, f)[inside] for f in _Samples.__dataclass_fields__)))
+        elif p.kind == "ellipsoid":
+            rz = (p.z1 - p.z0) / 2
+            area = 4 * math.pi * ((rx * ry) ** 1.6 + (rx * rz) ** 1.6 + (ry * rz) ** 1.6) ** (1 / 1.6) / 3 ** (1 / 1.6)
+            count = max(32, int(area / spacing**2))
+            k = np.arange(count) + 0.5
+            polar = np.arccos(1 - 2 * k / count)
+            azimuth = math.pi * (1 + 5**0.5) * k
+            unit = np.column_stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)])
+            unit *= 1.0 + 0.12 * rng.uniform(-1, 1, (count, 1))  # leafy, not a smooth ball
+            pos = np.column_stack([cx + rx * unit[:, 0], cy + ry * unit[:, 1], p.z0 + rz + rz * unit[:, 2]])
+            n = unit / np.linalg.norm(unit, axis=1, keepdims=True)
+            helper = np.where(np.abs(n[:, 2:3]) < 0.9, np.array([[0.0, 0, 1]]), np.array([[1.0, 0, 0]]))
+            t1 = np.cross(helper, n)
+            t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+            s = np.full(count, WIDTH_FACTOR * spacing)
+            ao = 0.75 + 0.25 * (n[:, 2] + 1) / 2
+            out.append(
+                _Samples(pos, t1, np.cross(n, t1), n, s, s, pos[:, :2] * 7.0, np.full(count, p.material, object), ao)
+            )
+    return _Samples.concat(out)
+
+
+def _walls(d: Dressing, spacing: float, rng) -> _Samples:
+    """Vertical faces along every wall polygon edge whose front is floor (free or under an object)."""
+    origins, eus, lens = [], [], []
+    for poly in d.walls:
+        for ring in (poly.exterior, *poly.interiors):
+            pts = np.asarray(ring.coords)
+            a, b = pts[:-1], pts[1:]
+            origins.append(a)
+            eus.append(b - a)
+            lens.append(np.linalg.norm(b - a, axis=1))
+    if not origins:
+        return _Samples.concat([])
+    a, e, length = np.vstack(origins), np.vstack(eus), np.concatenate(lens)
+    keep = length > 1e-6
+    a, e, length = a[keep], e[keep], length[keep]
+    # the ring runs with the wall on its left, so the room is on its right: the face frame (eu, ez) with
+    # eu along the edge has its normal eu × ez pointing right, into the room
+    eu = np.column_stack([e / length[:, None], np.zeros(len(e))])
+    origin = np.column_stack([a, np.zeros(len(a))])
+    ez = np.tile([0.0, 0.0, 1.0], (len(a), 1))
+    h = np.full(len(a), d.ceiling_height)
+    s = _faces(
+        origin, eu, ez, length, h, np.full(len(a), d.wall_material, object), np.zeros(len(a), bool), spacing, rng
+    )
+    grid = d.grid
+    front = s.pos[:, :2] + s.n[:, :2] * (0.5 * grid.resolution + 0.01)
+    rc = grid.to_cell(front)
+    rows, cols = grid.shape
+    inside = (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)
+    ok = np.zeros(len(rc), bool)
+    ok[inside] = d.floor_mask[rc[inside, 0], rc[inside, 1]]
+    s = _Samples(*(getattr(s, f)[ok] for f in _Samples.__dataclass_fields__))
+    # ambient occlusion: near the floor and the ceiling, and in inside corners (little room in front)
+    room = clearance_field(~d.wall_mask, grid.resolution)
+    probe = grid.to_cell(s.pos[:, :2] + s.n[:, :2] * 0.35)
+    probe = np.clip(probe, 0, np.array(grid.shape) - 1)
+    corner = np.clip((0.35 - room[probe[:, 0], probe[:, 1]]) / 0.35, 0.0, 1.0)
+    z = s.pos[:, 2]
+    s.ao = (1 - 0.28 * np.exp(-z / 0.25)) * (1 - 0.18 * np.exp(-(d.ceiling_height - z) / 0.2)) * (1 - 0.3 * corner)
+    return s
+
+
+def _floor_and_ceiling(d: Dressing, spacing: float, rng) -> _Samples:
+    grid = d.grid
+    x0, y0 = grid.origin
+    width, height = grid.shape[1] * grid.resolution, grid.shape[0] * grid.resolution
+    gx, gy = np.meshgrid(np.arange(spacing / 2, width, spacing), np.arange(spacing / 2, height, spacing))
+    xy = np.column_stack([gx.ravel() + x0, gy.ravel() + y0])
+    xy += rng.uniform(-JITTER, JITTER, xy.shape) * spacing
+    rc = np.clip(grid.to_cell(xy), 0, np.array(grid.shape) - 1)
+    keep = d.floor_mask[rc[:, 0], rc[:, 1]]
+    xy, rc = xy[keep], rc[keep]
+    n = len(xy)
+    near_obstacle = clearance_field(grid.free, grid.resolution)[rc[:, 0], rc[:, 1]]
+    near_wall = clearance_field(~d.wall_mask, grid.resolution)[rc[:, 0], rc[:, 1]]
+    ex, ey, ez = (np.tile(v, (n, 1)) for v in ([1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]))
+    s = np.full(n, WIDTH_FACTOR * spacing)
+    floor = _Samples(
+        np.column_stack([xy, np.zeros(n)]),
+        ex,
+        ey,
+        ez,
+        s,
+        s,
+        xy,
+        d.floor_material_at(xy),
+        1 - 0.35 * np.exp(-near_obstacle / 0.2),
+    )
+    ceiling = _Samples(
+        np.column_stack([xy, np.full(n, d.ceiling_height)]), ey, ex, -ez, s, s, xy, np.full(n, "ceiling", object),
+        1 - 0.25 * np.exp(-near_wall / 0.3),
+    )  # fmt: skip
+    return _Samples.concat([floor, ceiling])
+
+
+def frame_quats(t1: np.ndarray, t2: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(N, 4) wxyz rotations whose matrix has columns t1, t2, n (orthonormal right-handed frames (N, 3) each).
+
+    Shepperd's method evaluated for all four branches at once and selected per row by the largest of
+    (trace, m00, m11, m22): exact for rotation matrices, 180° turns included (every ceiling surfel is
+    one), and several times faster than a row-by-row extraction at this size.
+    """
+    m00, m10, m20 = t1.T
+    m01, m11, m21 = t2.T
+    m02, m12, m22 = n.T
+    trace = m00 + m11 + m22
+    branch = np.argmax(np.column_stack([trace, m00, m11, m22]), axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.sqrt(
+            np.maximum(1e-300, 1.0 + np.choose(branch, [trace, m00 - m11 - m22, m11 - m00 - m22, m22 - m00 - m11]))
+        )
+        half, inv = 0.5 * r, 0.5 / r
+        candidates = [
+            np.column_stack([half, (m21 - m12) * inv, (m02 - m20) * inv, (m10 - m01) * inv]),
+            np.column_stack([(m21 - m12) * inv, half, (m01 + m10) * inv, (m02 + m20) * inv]),
+            np.column_stack([(m02 - m20) * inv, (m01 + m10) * inv, half, (m12 + m21) * inv]),
+            np.column_stack([(m10 - m01) * inv, (m02 + m20) * inv, (m12 + m21) * inv, half]),
+        ]
+    q = np.choose(branch[:, None], candidates)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return np.where(q[:, :1] < 0, -q, q)
+
+
+def _colour(s: _Samples, seed: int) -> np.ndarray:
+    colour = np.zeros((len(s.pos), 3))
+    names, codes = np.unique(s.material.astype(str), return_inverse=True)
+    order = np.argsort(codes, kind="stable")
+    bounds = np.searchsorted(codes[order], np.arange(len(names) + 1))
+    for k, name in enumerate(names):
+        rows = order[bounds[k] : bounds[k + 1]]
+        colour[rows] = texture(str(name), s.uv[rows, 0], s.uv[rows, 1], seed + k)
+    shade = AMBIENT + DIFFUSE * np.maximum(s.n @ LIGHT, 0.0)
+    return np.clip(colour * (shade * s.ao)[:, None], 0.0, 1.0)
+
+
+def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M, seed: int = 0) -> GaussianCloud:
+    """Surfels over every visible surface of ``dressing`` (see the module docstring)."""
+    rng = derive_rng(seed, "splat", dressing.grid.shape, dressing.venue)
+    boxes = [p for p in dressing.parts if p.kind == "box"]
+    rounds = [p for p in dressing.parts if p.kind != "box"]
+    samples = _Samples.concat(
+        [
+            _floor_and_ceiling(dressing, spacing, rng),
+            _walls(dressing, spacing, rng),
+            _faces(*_box_faces(boxes), spacing, rng),
+            _round_parts(rounds, spacing, rng),
+        ]
+    )
+    colour = _colour(samples, dressing.seed)
+    quats = frame_quats(samples.t1, samples.t2, samples.n)
+    thin = THIN_FACTOR * np.minimum(samples.s1, samples.s2) / WIDTH_FACTOR
+    scales = np.column_stack([samples.s1, samples.s2, thin])
+    cell = np.floor(samples.pos / SORT_CELL_M).astype(np.int64)
+    order = np.lexsort((cell[:, 2], cell[:, 1], cell[:, 0]))  # stable: generation order within a cell
+    return GaussianCloud(
+        means=samples.pos[order].astype(np.float32),
+        quats=quats[order].astype(np.float32),
+        log_scales=np.log(scales[order]).astype(np.float32),
+        opacity_logits=np.full(len(order), OPACITY_LOGIT, np.float32),
+        sh_dc=((colour[order] - 0.5) / SH_C0).astype(np.float32),
+    )
+
+
+@dataclass(frozen=True)
+class DressResult:
+    """What :func:`dress_package` wrote: the Gaussian count and the file sizes."""
+
+    scene_id: str
+    gaussians: int
+    ply_mb: float
+    usd_kb: float
+
+
+def write_proxy(root: str | Path, hints: DressingHints, seed: int = 0) -> None:
+    """Write only the package's USD proxy (with ``hints`` in its metadata) from its dressing."""
+    from song.datasets.scenes.package import USD_PROXY, load_scene_package
+    from song.datasets.scenes.proxy import dressing_meshes
+    from song.datasets.scenes.usd import write_usd_proxy
+
+    package = load_scene_package(root, min_free_area_m2=0.0)
+    solids, surfaces = dressing_meshes(build_dressing(package.semantic_map, package.occupancy, hints, seed))
+    write_usd_proxy(Path(root) / USD_PROXY, solids, surfaces, hints.to_json())
+
+
+def dress_package(
+    root: str | Path, hints: DressingHints | None = None, spacing: float = SPACING_M, seed: int = 0
+) -> DressResult:
+    """Write a package's ``3dgs_compressed.ply`` and ``scene_flat.usda`` from its semantic map and occupancy.
+
+    ``hints`` default to the ones stored in the package's USD proxy (none when it has no proxy), so a
+    package made by the generator or the ProcTHOR importer is rebuilt exactly.
+    """
+    from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, load_scene_package
+    from song.datasets.scenes.ply import write_compressed_ply
+    from song.datasets.scenes.proxy import dressing_meshes
+    from song.datasets.scenes.usd import read_usd_dressing, write_usd_proxy
+
+    root = Path(root)
+    package = load_scene_package(root, min_free_area_m2=0.0)
+    if hints is None and (root / USD_PROXY).is_file():
+        text = read_usd_dressing(root / USD_PROXY)
+        hints = DressingHints.from_json(text) if text else None
+    hints = hints or DressingHints()
+    dressing = build_dressing(package.semantic_map, package.occupancy, hints, seed)
+    cloud = synthesize_gaussians(dressing, spacing, seed)
+    write_compressed_ply(root / GAUSSIANS, cloud)
+    solids, surfaces = dressing_meshes(dressing)
+    write_usd_proxy(root / USD_PROXY, solids, surfaces, hints.to_json())
+    return DressResult(
+        package.scene_id, len(cloud), (root / GAUSSIANS).stat().st_size / 1e6, (root / USD_PROXY).stat().st_size / 1e3
+    )
