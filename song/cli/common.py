@@ -67,3 +67,11 @@ def status_table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> 
             cells.append(value)
         table.add_row(*cells)
     return table
+
+
+def parse_size(text: str, option: str) -> tuple[int, int]:
+    """``"320x240"`` → ``(320, 240)``; a clear error naming ``option`` otherwise."""
+    width, sep, height = text.lower().partition("x")
+    if not sep or not width.isdigit() or not height.isdigit() or int(width) < 1 or int(height) < 1:
+        raise SongError(f"{option} {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 320x240")
+    return int(width), int(height)

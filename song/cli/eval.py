@@ -8,21 +8,12 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from song.cli import app
-from song.cli.common import ConfigOption, SetOption, console, err_console, handle_errors
+from song.cli.common import ConfigOption, SetOption, console, err_console, handle_errors, parse_size
 from song.config import parse_assignments, read_config_mapping
 from song.datasets.bench import open_benchmark
-from song.errors import SongError
 from song.runtime.evaluate import iter_eval, make_setup, write_results
 from song.runtime.metrics import markdown_table
 from song.runtime.params import apply_overrides
-
-
-def parse_resolution(text: str) -> dict[str, int]:
-    """``"320x240"`` → ``{"width": 320, "height": 240}``."""
-    width, sep, height = text.lower().partition("x")
-    if not sep or not width.isdigit() or not height.isdigit() or int(width) < 1 or int(height) < 1:
-        raise SongError(f"--resolution {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 320x240")
-    return {"width": int(width), "height": int(height)}
 
 
 @app.command("eval")
@@ -60,7 +51,8 @@ def eval_command(
         err_console.print(f"[yellow]override[/yellow] {key}: {old} → {new} (results marked unofficial)")
     camera: dict = {"backend": render_backend}
     if resolution:
-        camera.update(parse_resolution(resolution))
+        width, height = parse_size(resolution, "--resolution")
+        camera.update(width=width, height=height)
     episodes = list(release.episodes(difficulty=difficulty)) if difficulty else None
     total = len(episodes) if episodes is not None else len(release)
     table = {}

@@ -30,6 +30,29 @@ def scene(
     _report([render_scene(scene, out or Path(f"{scene.name}.png"))])
 
 
+@viz_app.command("view")
+@handle_errors
+def view(
+    scene: Path = typer.Argument(..., help="scene package folder with a Gaussian scene"),
+    out: Path = typer.Option(None, "--out", help="PNG path (default: <scene>-view.png here)"),
+    pose: str | None = typer.Option(None, "--pose", help="X,Y,YAW (m, m, rad); default: a pose that sees much"),
+    size: str = typer.Option("960x540", "--size", help="WxH, px"),
+) -> None:
+    """What a camera 1.2 m above the floor sees of the scene's Gaussians."""
+    from song.cli.common import parse_size
+    from song.viz.view import render_view
+
+    xyz = None
+    if pose is not None:
+        try:
+            x, y, yaw = (float(v) for v in pose.split(","))
+        except ValueError as exc:
+            raise typer.BadParameter(f"--pose {pose!r}: expected X,Y,YAW") from exc
+        xyz = (x, y, yaw)
+    width, height = parse_size(size, "--size")
+    _report([render_view(scene, out or Path(f"{scene.name}-view.png"), xyz, width, height)])
+
+
 @viz_app.command("crowd")
 @handle_errors
 def crowd(

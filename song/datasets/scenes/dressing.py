@@ -34,6 +34,7 @@ CEILING_HEIGHT_M = 2.6  # default wall height when the source gives none
 DOOR_HEIGHT_M = 2.1  # default top of an opening
 TRIM_M = 0.05  # width of the trim around an opening
 HANGING_MIN_M = 0.15  # objects whose bottom is higher than this hang (their parts are lifted)
+DOOR_LEAF_M = 0.04  # thickness of the closed door drawn outside an entrance
 PASSAGE_CATEGORIES = ("entrance", "door")  # objects that are openings, not obstacles
 
 
@@ -56,12 +57,14 @@ class DressingHints:
         floor_materials: region id → floor material.
         wall_material: a material name or ``"paint:#rrggbb"`` for every wall.
         ceiling_height_m: wall height, m.
+        seed: the dressing seed (furniture variants, textures, sample jitter).
     """
 
     openings: tuple[Opening, ...] = ()
     floor_materials: dict[str, str] = field(default_factory=dict)
     wall_material: str | None = None
     ceiling_height_m: float | None = None
+    seed: int = 0
 
     def to_json(self) -> str:
         """Canonical JSON text."""
@@ -80,6 +83,7 @@ class DressingHints:
             floor_materials=dict(data.get("floor_materials", {})),
             wall_material=data.get("wall_material"),
             ceiling_height_m=data.get("ceiling_height_m"),
+            seed=int(data.get("seed", 0)),
         )
 
 
@@ -112,17 +116,21 @@ class Dressing:
     wall_material: str
     seed: int
 
-    def floor_material_at(self, xy: np.ndarray) -> np.ndarray:
-        """(N,) floor material names at points (N, 2): the first region containing each point."""
+    def floor_materials_at(self, xy: np.ndarray) -> tuple[list[str], np.ndarray]:
+        """Floor materials at points (N, 2) as ``(names, index)``: ``names[index[i]]`` is point i's.
+
+        A point takes the material of the first region containing it, else the default floor.
+        """
         from shapely import contains_xy
 
-        out = np.full(len(xy), self.default_floor, dtype=object)
+        names = [self.default_floor] + [material for _, material in self.regions]
+        index = np.zeros(len(xy), dtype=np.int64)
         unset = np.ones(len(xy), dtype=bool)
-        for polygon, material in self.regions:
+        for k, (polygon, _) in enumerate(self.regions):
             inside = unset & contains_xy(polygon, xy[:, 0], xy[:, 1])
-            out[inside] = material
+            index[inside] = k + 1
             unset &= ~inside
-        return out
+        return names, index
 
 
 def object_mask(smap: SemanticMap, grid: OccupancyGrid) -> np.ndarray:
@@ -205,13 +213,40 @@ def opening_parts(index: int, opening: Opening, ceiling: float) -> list[Part]:
     return parts
 
 
-def build_dressing(
-    smap: SemanticMap, grid: OccupancyGrid, hints: DressingHints | None = None, seed: int = 0
-) -> Dressing:
+def _outside_side(opening: Opening, floor_mask: np.ndarray, grid: OccupancyGrid) -> float:
+    """+1 / −1 when the opening's left / right side (of a→b) has no floor (an entrance), else 0."""
+    a, b = np.asarray(opening.a, float), np.asarray(opening.b, float)
+    d = (b - a) / max(float(np.linalg.norm(b - a)), 1e-9)
+    left = np.array([-d[1], d[0]])
+    reach = opening.thickness / 2 + 2 * grid.resolution
+    rows, cols = floor_mask.shape
+    floor = []
+    for side in (1.0, -1.0):
+        r, c = grid.to_cell(((a + b) / 2 + side * reach * left)[None])[0]
+        floor.append(bool(0 <= r < rows and 0 <= c < cols and floor_mask[r, c]))
+    if floor[0] == floor[1]:
+        return 0.0
+    return 1.0 if not floor[0] else -1.0
+
+
+def door_leaf(index: int, opening: Opening, side: float) -> Part:
+    """A closed door just outside an entrance (the ``door`` group: seen, not an obstacle of the map)."""
+    a, b = np.asarray(opening.a, float), np.asarray(opening.b, float)
+    d = b - a
+    length = float(np.linalg.norm(d))
+    left = np.array([-d[1], d[0]]) / length
+    centre = (a + b) / 2 + side * (opening.thickness / 2 + DOOR_LEAF_M / 2) * left
+    yaw = float(np.arctan2(d[1], d[0]))
+    return Part(f"opening_{index}/door", "door", "box", tuple(centre), yaw, (length / 2, DOOR_LEAF_M / 2), 0.0,
+                opening.z_top, "door_panel", ("bottom",))  # fmt: skip
+
+
+def build_dressing(smap: SemanticMap, grid: OccupancyGrid, hints: DressingHints | None = None) -> Dressing:
     """The dressing of a scene (see the module docstring); deterministic in its inputs."""
     from shapely.geometry import Polygon
 
     hints = hints or DressingHints()
+    seed = hints.seed
     venue = smap.venue_type
     under_objects = object_mask(smap, grid)
     wall_mask = (grid.cells != 255) & ~under_objects
@@ -230,6 +265,9 @@ def build_dressing(
             parts.append(part)
     for index, opening in enumerate(hints.openings):
         parts += opening_parts(index, opening, ceiling)
+        side = _outside_side(opening, floor_mask, grid)
+        if side:  # an entrance: close it, or the camera would look out into the void
+            parts.append(door_leaf(index, opening, side))
     default_floor = floor_material(None, venue)
     regions = [
         (Polygon(region.polygon), hints.floor_materials.get(region.id) or floor_material(region.type, venue))

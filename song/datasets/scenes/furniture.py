@@ -27,7 +27,7 @@ class Part:
 
     Attributes:
         name: a stable name (``"desk_1/top"``), also the USD prim name.
-        group: what it belongs to: an object id, ``"lintel"``, ``"frame"``.
+        group: what it belongs to: an object id, ``"lintel"``, ``"frame"``, ``"door"`` (an entrance's closed door).
         kind: ``"box"`` (oriented box), ``"cylinder"`` (upright, elliptic section) or ``"ellipsoid"``.
         centre: (x, y) of the part's axis, m.
         yaw: rotation of the local x axis from world +x, rad.

@@ -346,11 +346,11 @@ def generate_scene(
         objects=objects,
     )
     root = write_scene_package(Path(out_dir) / scene_id, smap, cells)
-    hints = DressingHints(openings=tuple(openings), ceiling_height_m=WALL_HEIGHT_M)
+    hints = DressingHints(openings=tuple(openings), ceiling_height_m=WALL_HEIGHT_M, seed=seed)
     if splat:
-        dress_package(root, hints, spacing, seed)
+        dress_package(root, hints, spacing)
     else:
-        write_proxy(root, hints, seed)
+        write_proxy(root, hints)
     return root
 
 

@@ -64,6 +64,7 @@ MATERIALS: dict[str, Material] = {
         Material("pot_clay", (0.62, 0.36, 0.24), "tiles"),
         Material("books", (0.50, 0.30, 0.25), "books"),
         Material("stone", (0.66, 0.64, 0.60), "tiles"),
+        Material("door_panel", (0.46, 0.33, 0.22), "wood"),
     )
 }
 

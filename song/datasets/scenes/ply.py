@@ -249,16 +249,17 @@ def _pack_unorm(t: np.ndarray, bits: int) -> np.ndarray:
     return np.clip(np.floor(t * top + 0.5), 0, top).astype(np.uint32)
 
 
+_OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])  # the three components stored per largest
+
+
 def _pack_rotation(quats: np.ndarray) -> np.ndarray:
     q = quats / np.linalg.norm(quats, axis=1, keepdims=True)
     largest = np.argmax(np.abs(q), axis=1)  # first of equal magnitudes, as SuperSplat
-    q = q * np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)[:, None]  # q ≡ −q: make it positive
-    word = largest.astype(np.uint32) << np.uint32(30)
-    for k in range(4):
-        rows = largest == k
-        t = _pack_unorm(q[rows][:, [i for i in range(4) if i != k]] * SQRT1_2 + 0.5, 10)
-        word[rows] |= (t[:, 0] << np.uint32(20)) | (t[:, 1] << np.uint32(10)) | t[:, 2]
-    return word
+    sign = np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)  # q ≡ −q: make the largest positive
+    t = _pack_unorm(np.take_along_axis(q, _OTHERS[largest], axis=1) * sign[:, None] * SQRT1_2 + 0.5, 10)
+    return (
+        (largest.astype(np.uint32) << np.uint32(30)) | (t[:, 0] << np.uint32(20)) | (t[:, 1] << np.uint32(10)) | t[:, 2]
+    )
 
 
 def _pack_111011(t: np.ndarray) -> np.ndarray:
@@ -271,9 +272,11 @@ def _pack_111011(t: np.ndarray) -> np.ndarray:
 
 def _chunk_ranges(values: np.ndarray, n_chunks: int) -> tuple[np.ndarray, np.ndarray]:
     """(n_chunks, D) min and max; the last chunk is padded with copies of the last row."""
-    pad = n_chunks * CHUNK - len(values)
-    padded = np.concatenate([values, np.repeat(values[-1:], pad, axis=0)]).reshape(n_chunks, CHUNK, -1)
-    return padded.min(axis=1), padded.max(axis=1)
+    columns = np.empty((values.shape[1], n_chunks * CHUNK))  # one contiguous row per dimension: fast reductions
+    columns[:, : len(values)] = values.T
+    columns[:, len(values) :] = values[-1:].T
+    columns = columns.reshape(values.shape[1], n_chunks, CHUNK)
+    return columns.min(axis=2).T, columns.max(axis=2).T
 
 
 def _fraction(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -41,7 +41,7 @@ from song.datasets.scenes.splat import SPACING_M, dress_package, write_proxy
 from song.errors import SceneError, SongError
 
 FLOOR_OBJECT_MAX_BOTTOM_M = 0.15
-MIN_FOOTPRINT_M = 0.15  # smaller floor objects (bins, plungers) are not navigation obstacles
+MIN_FOOTPRINT_M = 0.05  # floor objects smaller than one grid cell (candles, eggs) cannot be drawn on the map
 MARGIN_M = 0.3
 CATEGORIES = {
     "Television": "appliance",

@@ -98,13 +98,13 @@ def part_mesh(part: Part) -> ProxyMesh:
 
 
 def dressing_meshes(dressing: Dressing) -> tuple[list[ProxyMesh], list[ProxyMesh]]:
-    """``(solids, surfaces)``: walls and parts (obstacles), floor and ceiling."""
+    """``(solids, surfaces)``: walls and parts (obstacles); floor, ceiling and entrance doors (seen only)."""
     from song.geometry.navmesh import trace_legal
 
     solids = [extrude(f"wall_{k}", poly, 0.0, dressing.ceiling_height) for k, poly in enumerate(dressing.walls)]
-    solids += [part_mesh(part) for part in dressing.parts]
+    solids += [part_mesh(part) for part in dressing.parts if part.group != "door"]
     grid = dressing.grid
-    surfaces = []
+    surfaces = [part_mesh(part) for part in dressing.parts if part.group == "door"]
     for k, poly in enumerate(trace_legal(dressing.floor_mask, grid.resolution, grid.origin)):
         from shapely.geometry.polygon import orient
 

@@ -3,22 +3,26 @@
 Every visible surface of the :class:`~song.datasets.scenes.dressing.Dressing` -- floor, walls up to the
 ceiling, ceiling, furniture parts, lintels and trims -- is covered with surfels on a jittered grid of
 ``spacing`` metres: each Gaussian lies on its surface, its rotation aligns its local z with the surface
-normal, it is thin along the normal (6 % of the spacing) and 0.8 spacings wide across (so neighbours
-overlap and no hole opens even from 0.3 m away), and near-opaque (opacity 0.993). Faces smaller than the
+normal, it is thin along the normal (6 % of the spacing) and σ = 0.6 spacings wide across (neighbours
+overlap, so no hole opens even from 0.3 m away, while a surface's edge bleeds only about half a
+spacing past the geometry), and near-opaque (opacity 0.993). Faces smaller than the
 spacing get proportionally finer samples. Hidden faces (box bottoms on the floor, the back of open
 shelves, walls facing other walls) are skipped.
 
 Colour = procedural material texture (:mod:`song.datasets.scenes.materials`) × baked shading: a soft
 directional light from above (0.72 ambient + 0.28·max(0, n·L)) and ambient occlusion -- floors darken
 within ~25 cm of walls and furniture, walls near the floor, the ceiling and inside corners, furniture
-toward the floor and under raised parts. Gaussians are written in spatial order (half-metre cells), so
+toward the floor and under raised parts. Entrances get a closed door just outside them (a camera would
+otherwise look out into the void). Gaussians are written in spatial order (half-metre cells), so
 the SuperSplat chunks of 256 are compact and a renderer culls them well. Deterministic in the scene and
 the seed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +36,7 @@ from song.geometry.freespace import clearance_field
 from song.util import derive_rng
 
 SPACING_M = 0.035  # default surfel spacing: ~300 k–1 M Gaussians for an indoor scene
-WIDTH_FACTOR = 0.8  # in-plane σ as a fraction of the local spacing
+WIDTH_FACTOR = 0.6  # in-plane σ as a fraction of the local spacing (no holes from 0.3 m; edges bleed ≈ ½ spacing)
 THIN_FACTOR = 0.06  # σ along the normal as a fraction of the local spacing
 JITTER = 0.2  # sample positions jitter by this fraction of the spacing
 OPACITY_LOGIT = 5.0  # sigmoid(5) = 0.993
@@ -41,13 +45,29 @@ AMBIENT, DIFFUSE = 0.72, 0.28
 SORT_CELL_M = 0.5
 
 
+_MATERIAL_CODES: dict[str, int] = {}  # material name → small int, for grouping samples by material
+_MATERIAL_NAMES: list[str] = []
+
+
+def _codes(names) -> np.ndarray:
+    """int32 codes of material names (assigned on first sight; only used to group samples)."""
+    for name in names:
+        if name not in _MATERIAL_CODES:
+            _MATERIAL_CODES[name] = len(_MATERIAL_NAMES)
+            _MATERIAL_NAMES.append(name)
+    return np.array([_MATERIAL_CODES[name] for name in names], dtype=np.int32)
+
+
 @dataclass
 class _Samples:
-    """Surface samples before colouring: positions, frames (t1, t2, n), in-plane scales, material names."""
+    """Surface samples before colouring.
+
+    Positions, rotations (wxyz, local z = normal), normals, in-plane scales, texture coordinates,
+    material codes (:func:`_codes`), ambient occlusion.
+    """
 
     pos: np.ndarray
-    t1: np.ndarray
-    t2: np.ndarray
+    quat: np.ndarray
     n: np.ndarray
     s1: np.ndarray
     s2: np.ndarray
@@ -60,7 +80,9 @@ class _Samples:
         items = [i for i in items if len(i.pos)]
         if not items:
             z = np.zeros((0, 3))
-            return cls(z, z, z, z, np.zeros(0), np.zeros(0), np.zeros((0, 2)), np.zeros(0, object), np.zeros(0))
+            return cls(
+                z, np.zeros((0, 4)), z, np.zeros(0), np.zeros(0), np.zeros((0, 2)), np.zeros(0, np.int32), np.zeros(0)
+            )
         return cls(*(np.concatenate([getattr(i, f) for i in items]) for f in cls.__dataclass_fields__))
 
 
@@ -93,14 +115,16 @@ def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples
     u = (i + 0.5 + JITTER * rng.uniform(-1, 1, len(k))) * du
     v = (j + 0.5 + JITTER * rng.uniform(-1, 1, len(k))) * dv
     pos = origin[face] + u[:, None] * eu[face] + v[:, None] * ev[face]
-    normal = np.cross(eu, ev)[face]
+    normal_f = np.cross(eu, ev)
+    normal = normal_f[face]
     ao = np.ones(len(k))
     standing = ao_floor[face]
     ao[standing] = 1.0 - 0.3 * np.exp(-pos[standing, 2] / 0.15)
     down = normal[:, 2] < -0.5
     ao[down] = 0.6  # undersides (table tops, shelves, lintels) face the floor
     uv = np.column_stack([u + origin[face] @ np.array([1.0, 0.7, 0.3]), v + origin[face, 2]])
-    return _Samples(pos, eu[face], ev[face], normal, WIDTH_FACTOR * du, WIDTH_FACTOR * dv, uv, material[face], ao)
+    quat = frame_quats(eu, ev, normal_f)[face]  # one rotation per face
+    return _Samples(pos, quat, normal, WIDTH_FACTOR * du, WIDTH_FACTOR * dv, uv, _codes(material)[face], ao)
 
 
 def _box_faces(parts: list[Part]) -> tuple:
@@ -152,13 +176,12 @@ def _round_parts(parts: list[Part], spacing: float, rng) -> _Samples:
             out.append(
                 _Samples(
                     pos,
-                    np.cross(t2, n),
-                    t2,
+                    frame_quats(np.cross(t2, n), t2, n),
                     n,
                     s,
                     s,
                     np.column_stack([a * rx, z]),
-                    np.full(len(a), p.material, object),
+                    np.full(len(a), _codes([p.material])[0]),
                     ao,
                 )
             )
@@ -184,9 +207,8 @@ def _round_parts(parts: list[Part], spacing: float, rng) -> _Samples:
             t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
             s = np.full(count, WIDTH_FACTOR * spacing)
             ao = 0.75 + 0.25 * (n[:, 2] + 1) / 2
-            out.append(
-                _Samples(pos, t1, np.cross(n, t1), n, s, s, pos[:, :2] * 7.0, np.full(count, p.material, object), ao)
-            )
+            quat = frame_quats(t1, np.cross(n, t1), n)
+            out.append(_Samples(pos, quat, n, s, s, pos[:, :2] * 7.0, np.full(count, _codes([p.material])[0]), ao))
     return _Samples.concat(out)
 
 
@@ -245,22 +267,18 @@ def _floor_and_ceiling(d: Dressing, spacing: float, rng) -> _Samples:
     n = len(xy)
     near_obstacle = clearance_field(grid.free, grid.resolution)[rc[:, 0], rc[:, 1]]
     near_wall = clearance_field(~d.wall_mask, grid.resolution)[rc[:, 0], rc[:, 1]]
-    ex, ey, ez = (np.tile(v, (n, 1)) for v in ([1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]))
+    up, down = np.tile([0.0, 0, 1.0], (n, 1)), np.tile([0.0, 0, -1.0], (n, 1))
+    x, y, z = np.eye(3)
+    up_quat, down_quat = frame_quats(np.array([x, y]), np.array([y, x]), np.array([z, -z]))
     s = np.full(n, WIDTH_FACTOR * spacing)
+    names, index = d.floor_materials_at(xy)
     floor = _Samples(
-        np.column_stack([xy, np.zeros(n)]),
-        ex,
-        ey,
-        ez,
-        s,
-        s,
-        xy,
-        d.floor_material_at(xy),
+        np.column_stack([xy, np.zeros(n)]), np.tile(up_quat, (n, 1)), up, s, s, xy, _codes(names)[index],
         1 - 0.35 * np.exp(-near_obstacle / 0.2),
-    )
+    )  # fmt: skip
     ceiling = _Samples(
-        np.column_stack([xy, np.full(n, d.ceiling_height)]), ey, ex, -ez, s, s, xy, np.full(n, "ceiling", object),
-        1 - 0.25 * np.exp(-near_wall / 0.3),
+        np.column_stack([xy, np.full(n, d.ceiling_height)]), np.tile(down_quat, (n, 1)), down, s, s, xy,
+        np.full(n, _codes(["ceiling"])[0]), 1 - 0.25 * np.exp(-near_wall / 0.3),
     )  # fmt: skip
     return _Samples.concat([floor, ceiling])
 
@@ -295,19 +313,20 @@ def frame_quats(t1: np.ndarray, t2: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 def _colour(s: _Samples, seed: int) -> np.ndarray:
     colour = np.zeros((len(s.pos), 3))
-    names, codes = np.unique(s.material.astype(str), return_inverse=True)
-    order = np.argsort(codes, kind="stable")
-    bounds = np.searchsorted(codes[order], np.arange(len(names) + 1))
-    for k, name in enumerate(names):
+    order = np.argsort(s.material, kind="stable")
+    codes = np.unique(s.material)
+    bounds = np.searchsorted(s.material[order], np.concatenate([codes, [np.iinfo(np.int32).max]]))
+    for k, code in enumerate(codes):
         rows = order[bounds[k] : bounds[k + 1]]
-        colour[rows] = texture(str(name), s.uv[rows, 0], s.uv[rows, 1], seed + k)
+        name = _MATERIAL_NAMES[code]
+        colour[rows] = texture(name, s.uv[rows, 0], s.uv[rows, 1], seed + zlib.crc32(name.encode()) % 65521)
     shade = AMBIENT + DIFFUSE * np.maximum(s.n @ LIGHT, 0.0)
     return np.clip(colour * (shade * s.ao)[:, None], 0.0, 1.0)
 
 
-def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M, seed: int = 0) -> GaussianCloud:
-    """Surfels over every visible surface of ``dressing`` (see the module docstring)."""
-    rng = derive_rng(seed, "splat", dressing.grid.shape, dressing.venue)
+def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M) -> GaussianCloud:
+    """Surfels over every visible surface of ``dressing`` (see the module docstring), seeded by its seed."""
+    rng = derive_rng(dressing.seed, "splat", dressing.grid.shape, dressing.venue)
     boxes = [p for p in dressing.parts if p.kind == "box"]
     rounds = [p for p in dressing.parts if p.kind != "box"]
     samples = _Samples.concat(
@@ -319,11 +338,14 @@ def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M, seed: i
         ]
     )
     colour = _colour(samples, dressing.seed)
-    quats = frame_quats(samples.t1, samples.t2, samples.n)
+    quats = samples.quat
     thin = THIN_FACTOR * np.minimum(samples.s1, samples.s2) / WIDTH_FACTOR
     scales = np.column_stack([samples.s1, samples.s2, thin])
     cell = np.floor(samples.pos / SORT_CELL_M).astype(np.int64)
-    order = np.lexsort((cell[:, 2], cell[:, 1], cell[:, 0]))  # stable: generation order within a cell
+    cell -= cell.min(axis=0)
+    span = cell.max(axis=0) + 1
+    key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
+    order = np.argsort(key, kind="stable")  # x-major cells; generation order within a cell
     return GaussianCloud(
         means=samples.pos[order].astype(np.float32),
         quats=quats[order].astype(np.float32),
@@ -343,24 +365,24 @@ class DressResult:
     usd_kb: float
 
 
-def write_proxy(root: str | Path, hints: DressingHints, seed: int = 0) -> None:
+def write_proxy(root: str | Path, hints: DressingHints) -> None:
     """Write only the package's USD proxy (with ``hints`` in its metadata) from its dressing."""
     from song.datasets.scenes.package import USD_PROXY, load_scene_package
     from song.datasets.scenes.proxy import dressing_meshes
     from song.datasets.scenes.usd import write_usd_proxy
 
     package = load_scene_package(root, min_free_area_m2=0.0)
-    solids, surfaces = dressing_meshes(build_dressing(package.semantic_map, package.occupancy, hints, seed))
+    solids, surfaces = dressing_meshes(build_dressing(package.semantic_map, package.occupancy, hints))
     write_usd_proxy(Path(root) / USD_PROXY, solids, surfaces, hints.to_json())
 
 
 def dress_package(
-    root: str | Path, hints: DressingHints | None = None, spacing: float = SPACING_M, seed: int = 0
+    root: str | Path, hints: DressingHints | None = None, spacing: float = SPACING_M, seed: int | None = None
 ) -> DressResult:
     """Write a package's ``3dgs_compressed.ply`` and ``scene_flat.usda`` from its semantic map and occupancy.
 
     ``hints`` default to the ones stored in the package's USD proxy (none when it has no proxy), so a
-    package made by the generator or the ProcTHOR importer is rebuilt exactly.
+    package made by the generator or the ProcTHOR importer is rebuilt exactly; ``seed`` replaces theirs.
     """
     from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, load_scene_package
     from song.datasets.scenes.ply import write_compressed_ply
@@ -373,8 +395,10 @@ def dress_package(
         text = read_usd_dressing(root / USD_PROXY)
         hints = DressingHints.from_json(text) if text else None
     hints = hints or DressingHints()
-    dressing = build_dressing(package.semantic_map, package.occupancy, hints, seed)
-    cloud = synthesize_gaussians(dressing, spacing, seed)
+    if seed is not None:
+        hints = dataclasses.replace(hints, seed=seed)
+    dressing = build_dressing(package.semantic_map, package.occupancy, hints)
+    cloud = synthesize_gaussians(dressing, spacing)
     write_compressed_ply(root / GAUSSIANS, cloud)
     solids, surfaces = dressing_meshes(dressing)
     write_usd_proxy(root / USD_PROXY, solids, surfaces, hints.to_json())

@@ -12,7 +12,13 @@ from shapely import contains_xy
 from shapely.geometry import Polygon
 
 from song.datasets.scenes import load_scene_package
-from song.datasets.scenes.procthor import import_procthor, unity_to_world, unity_yaw_axes
+from song.datasets.scenes.procthor import (
+    FLOOR_OBJECT_MAX_BOTTOM_M,
+    import_procthor,
+    load_asset_table,
+    unity_to_world,
+    unity_yaw_axes,
+)
 from song.geometry.freespace import components, erode
 from tests.conftest import SHARED_HOUSES as HOUSES
 from tests.conftest import shared_file
@@ -77,3 +83,63 @@ def test_jsonl_gz_batch_with_a_bad_house(tmp_path: Path) -> None:
     results = import_procthor(src, tmp_path / "out")
     assert results[0].path is not None and results[1].path is None
     assert "houses.jsonl.gz" in results[1].error and "\n" not in results[1].error
+
+
+def test_every_floor_object_is_kept_with_the_real_asset_database(imported: list[Path]) -> None:
+    """Sized from the procthor package's database: every object standing on the floor is on the map."""
+    table = load_asset_table()
+    for root in imported:
+        house = json.loads((shared_file(HOUSES) / f"{root.name.removeprefix('procthor_')}.json").read_text())
+        on_floor = [
+            o
+            for o in house["objects"]
+            if o["position"]["y"] - table[o["assetId"]]["boundingBox"]["y"] / 2 <= FLOOR_OBJECT_MAX_BOTTOM_M
+        ]
+        assert len(load_scene_package(root).semantic_map.objects) == len(on_floor) >= 17
+
+
+def test_missing_assets_are_counted_and_named_per_house(tmp_path: Path) -> None:
+    table = load_asset_table()
+    house = json.loads((shared_file(HOUSES) / "house_6.json").read_text())
+    gone = {o["assetId"] for o in house["objects"] if o["position"]["y"] < 1.0}
+    gone = sorted(gone)[: len(gone) // 2]
+    missing = sum(o["assetId"] in gone for o in house["objects"] if o["position"]["y"] < 1.0)
+    db = tmp_path / "assets.json"
+    db.write_text(json.dumps({k: v for k, v in table.items() if k not in gone}))
+    src = tmp_path / "houses"
+    src.mkdir()
+    (src / "house_6.json").write_text(json.dumps(house))
+    [result] = import_procthor(src, tmp_path / "out", assets=db, splat=False)
+    assert result.error == "" and result.unsized == missing > 0
+    assert f"{missing} object(s)" in result.warning and "procthor_house_6" in result.warning
+    # and the command line says so
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    out = CliRunner().invoke(
+        app,
+        ["scenes", "import", "procthor", str(src), "--out", str(tmp_path / "cli"), "--assets", str(db), "--no-splat"],
+    )
+    assert out.exit_code == 0, out.output
+    assert f"{missing} object(s) skipped" in " ".join(out.output.split())
+
+
+def test_house_without_objects_goes_through_every_stage(tmp_path: Path) -> None:
+    """The regression: a house left with no objects crashed the intents stage."""
+    from song.config import SongConfig
+    from song.datasets.run import read_intents
+    from song.pipeline.chain import iter_run
+
+    house = json.loads((shared_file(HOUSES) / "house_6.json").read_text())
+    house["objects"] = []
+    src = tmp_path / "houses"
+    src.mkdir()
+    (src / "house_6.json").write_text(json.dumps(house))
+    [result] = import_procthor(src, tmp_path / "scenes", splat=True, spacing=0.1)
+    assert result.error == "" and (result.path / "3dgs_compressed.ply").is_file()
+    stages = ("intents", "crowd", "motion", "binding")
+    [scene] = iter_run(tmp_path / "scenes", tmp_path / "run", SongConfig(seed=0), stages, executor="serial")
+    assert scene.status == "ok", scene.error
+    intents = read_intents(tmp_path / "run" / "scenes" / result.scene_id)
+    assert intents.intents == [] and "object" in intents.notes[0]

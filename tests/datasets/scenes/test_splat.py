@@ -1,0 +1,223 @@
+"""Synthesised Gaussian scenes: on the map's surfaces, agreeing with the USD proxy, without holes, deterministic."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.datasets.scenes import load_scene_package
+from song.datasets.scenes.dressing import DressingHints, build_dressing
+from song.datasets.scenes.generate import generate_scene
+from song.datasets.scenes.package import GAUSSIANS, USD_PROXY
+from song.datasets.scenes.ply import read_gaussian_ply
+from song.datasets.scenes.splat import dress_package
+from song.datasets.scenes.usd import read_usd_dressing, read_usd_proxy, read_usd_surfaces
+from song.geometry.freespace import clearance_field
+from song.render import render, robot_camera
+from song.render.mesh_depth import mesh_depth
+from song.runtime.vision import scene_gaussians
+from tests.conftest import GUITAR, shared_file
+
+CAMERA_HEIGHT_M, HFOV_DEG = 0.8, 70.0
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A procedural office at the default density, with its Gaussians and USD proxy."""
+    return generate_scene("office_0000", "office", 3, tmp_path_factory.mktemp("splat"), splat=True)
+
+
+def _normals(quats: np.ndarray) -> np.ndarray:
+    """(N, 3) third column of each wxyz rotation: a surfel's normal."""
+    w, x, y, z = quats.T
+    return np.column_stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
+
+
+def _cells(grid, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(row, col) of points and whether they fall on the grid."""
+    rc = grid.to_cell(xy)
+    inside = (rc[:, 0] >= 0) & (rc[:, 0] < grid.shape[0]) & (rc[:, 1] >= 0) & (rc[:, 1] < grid.shape[1])
+    return np.clip(rc, 0, np.array(grid.shape) - 1), inside
+
+
+def test_gaussians_lie_on_the_map(office: Path) -> None:
+    package = load_scene_package(office)
+    grid = package.occupancy
+    cloud = read_gaussian_ply(office / GAUSSIANS)
+    assert 300_000 <= len(cloud) <= 1_000_000
+    z, normal = cloud.means[:, 2], _normals(cloud.quats.astype(np.float64))
+    floor = (np.abs(z) < 1e-3) & (normal[:, 2] > 0.99)
+    ceiling = normal[:, 2] < -0.99
+    dressing = build_dressing(
+        package.semantic_map, grid, DressingHints.from_json(read_usd_dressing(office / USD_PROXY))
+    )
+    rc, inside = _cells(grid, cloud.means[floor, :2].astype(np.float64))
+    assert inside.all() and dressing.floor_mask[rc[:, 0], rc[:, 1]].all()  # floor: over free or object cells
+    # every other surfel below head height (the map is a slice at body height; lintels span doorways)
+    # sits on an obstacle: half a cell behind it, into the solid, is an occupied cell (walls are traced
+    # from the cells and simplified within half a cell)
+    solid = ~floor & ~ceiling & (z > 1e-3) & (z < 2.0)
+    behind = cloud.means[solid, :2] - (0.5 * grid.resolution + 0.001) * normal[solid, :2]
+    rc, inside = _cells(grid, behind.astype(np.float64))
+    occupied = inside & (grid.cells[rc[:, 0], rc[:, 1]] != 255)
+    doors = _door_leaf_mask(dressing, cloud.means[solid])
+    assert occupied[~doors].mean() >= 0.99, occupied[~doors].mean()
+    # surfels are thin along their normal and near-opaque
+    scales = np.exp(cloud.log_scales)
+    assert (scales[:, 2] <= 0.15 * scales[:, :2].min(axis=1)).all()  # THIN_FACTOR / WIDTH_FACTOR = 0.1, quantised
+    assert (1 / (1 + np.exp(-cloud.opacity_logits)) > 0.99).all()
+
+
+def _door_leaf_mask(dressing, points: np.ndarray) -> np.ndarray:
+    """Points on the closed doors drawn just outside entrances (seen, but outside the map's obstacles)."""
+    out = np.zeros(len(points), bool)
+    for part in dressing.parts:
+        if part.group == "door":
+            c, s = np.cos(part.yaw), np.sin(part.yaw)
+            d = points[:, :2] - np.asarray(part.centre)
+            u, v = d @ [c, s], d @ [-s, c]
+            out |= (np.abs(u) <= part.half[0] + 1e-3) & (np.abs(v) <= part.half[1] + 1e-3)
+    return out
+
+
+def test_walls_follow_the_occupancy_map(office: Path) -> None:
+    """Every wall cell facing the floor carries wall surfels (the map's walls, not an approximation)."""
+    package = load_scene_package(office)
+    grid = package.occupancy
+    cloud = read_gaussian_ply(office / GAUSSIANS)
+    normal = _normals(cloud.quats.astype(np.float64))
+    wall = (np.abs(normal[:, 2]) < 0.01) & (cloud.means[:, 2] > 1.0) & (cloud.means[:, 2] < 2.0)  # above furniture
+    behind = cloud.means[wall, :2] - (0.5 * grid.resolution + 0.001) * normal[wall, :2]
+    rc, inside = _cells(grid, behind.astype(np.float64))
+    has = np.zeros(grid.shape, bool)
+    has[rc[inside, 0], rc[inside, 1]] = True
+    dressing = build_dressing(package.semantic_map, grid)
+    facing = dressing.wall_mask.copy()
+    facing[1:-1, 1:-1] &= (
+        dressing.floor_mask[:-2, 1:-1]
+        | dressing.floor_mask[2:, 1:-1]
+        | dressing.floor_mask[1:-1, :-2]
+        | dressing.floor_mask[1:-1, 2:]
+    )
+    facing[[0, -1], :] = facing[:, [0, -1]] = False
+    assert has[facing].mean() >= 0.98, has[facing].mean()
+
+
+def test_usd_proxy_is_closed_valid_and_on_the_map(office: Path) -> None:
+    from pxr import Usd, UsdValidation
+
+    registry = UsdValidation.ValidationRegistry()
+    validators = [registry.GetOrLoadValidatorByName(m.name) for m in registry.GetAllValidatorMetadata()]
+    errors = UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(office / USD_PROXY)))
+    assert [e.GetErrorAsString() for e in errors] == []
+    grid = load_scene_package(office).occupancy
+    solids = read_usd_proxy(office / USD_PROXY)
+    assert len(solids) > 40
+    inward = []
+    for mesh in solids:
+        edges = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        _, counts = np.unique(edges, axis=0, return_counts=True)
+        assert (counts == 2).all(), f"{mesh.name} is not closed"
+        t = mesh.vertices[mesh.faces]
+        volume = np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6
+        assert volume > 0, f"{mesh.name} faces inward"
+        cross = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        side = np.abs(cross[:, 2]) < 1e-9 * np.linalg.norm(cross, axis=1).max()  # vertical faces
+        n = cross[side] / np.linalg.norm(cross[side], axis=1, keepdims=True)
+        if not mesh.name.startswith("opening"):  # lintels and trims span doorways, above head height
+            inward.append(t[side].mean(axis=1)[:, :2] - (0.5 * grid.resolution + 0.001) * n[:, :2])
+    rc, inside = _cells(grid, np.vstack(inward))
+    assert (inside & (grid.cells[rc[:, 0], rc[:, 1]] != 255)).mean() >= 0.99
+    assert {m.name.split("_")[0] for m in read_usd_surfaces(office / USD_PROXY)} >= {"floor", "ceiling"}
+
+
+def _poses(grid, count: int, clearance_m: float, seed: int) -> np.ndarray:
+    clear = clearance_field(grid.free, grid.resolution)
+    cells = np.argwhere(clear > clearance_m)
+    rng = np.random.default_rng(seed)
+    xy = grid.to_world(cells[rng.integers(len(cells), size=count)])
+    return np.column_stack([xy, rng.uniform(-np.pi, np.pi, count)])
+
+
+def test_rendered_depth_matches_the_proxy(office: Path) -> None:
+    """From 50 random robot poses: the splats cover what the proxy says is there, at the proxy's depth."""
+    grid = load_scene_package(office).occupancy
+    gaussians = scene_gaussians(office / GAUSSIANS)
+    meshes = read_usd_proxy(office / USD_PROXY) + read_usd_surfaces(office / USD_PROXY)
+    errors, covered, seen = [], 0, 0
+    for x, y, yaw in _poses(grid, 50, 0.3, seed=0):
+        camera = robot_camera(x, y, yaw, CAMERA_HEIGHT_M, HFOV_DEG, 320, 240)
+        out = render(gaussians, camera)
+        truth = mesh_depth(meshes, camera)
+        surface = np.isfinite(truth)
+        hit = surface & (out.alpha > 0.5)
+        seen, covered = seen + surface.sum(), covered + hit.sum()
+        errors.append(np.abs(out.depth[hit] - truth[hit]))
+    errors = np.concatenate(errors)
+    assert covered / seen >= 0.98, covered / seen
+    assert np.median(errors) <= 0.03, np.median(errors)
+    assert np.percentile(errors, 95) <= 0.10, np.percentile(errors, 95)
+
+
+def test_no_holes_from_30_cm(office: Path) -> None:
+    """Facing the nearest obstacle from 0.3 m, every pixel is covered."""
+    grid = load_scene_package(office).occupancy
+    gaussians = scene_gaussians(office / GAUSSIANS)
+    clear = clearance_field(grid.free, grid.resolution)
+    gy, gx = np.gradient(clear)
+    cells = np.argwhere((clear > 0.29) & (clear < 0.31))
+    rng = np.random.default_rng(1)
+    for r, c in cells[rng.integers(len(cells), size=12)]:
+        x, y = grid.to_world(np.array([[r, c]]))[0]
+        yaw = np.arctan2(gy[r, c], -gx[r, c])  # down the clearance gradient (rows grow toward −y)
+        out = render(gaussians, robot_camera(x, y, yaw, CAMERA_HEIGHT_M, HFOV_DEG, 160, 120))
+        assert out.alpha.min() > 0.5, (x, y, yaw, out.alpha.min())
+
+
+def test_mesh_depth_of_a_plane() -> None:
+    """The proxy z-buffer itself: a wall 2 m ahead, seen straight on and across the near plane."""
+    from song.datasets.scenes.usd import ProxyMesh
+
+    wall = ProxyMesh(
+        "wall", np.array([[2.0, -5, 0], [2.0, 5, 0], [2.0, 5, 3], [2.0, -5, 3]]), np.array([[0, 1, 2], [0, 2, 3]])
+    )
+    floor = ProxyMesh(
+        "floor", np.array([[-5.0, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]]), np.array([[0, 1, 2], [0, 2, 3]])
+    )
+    camera = robot_camera(0.0, 0.0, 0.0, 0.8, 90.0, 64, 48)
+    depth = mesh_depth([wall, floor], camera)
+    assert np.isfinite(depth).all()
+    np.testing.assert_allclose(depth[:20], 2.0, rtol=1e-5)  # above the horizon: the wall, planar depth 2 m
+    # below: the floor until it meets the wall (the floor spans behind the camera: clipped at the near plane)
+    row = 47
+    v = (row + 0.5 - camera.cy) / camera.fy
+    assert depth[row, 32] == pytest.approx(min(2.0, 0.8 / v), rel=1e-5)
+
+
+def test_same_seed_same_bytes_and_a_supersplat_file(office: Path, tmp_path: Path) -> None:
+    import shutil
+
+    for name in ("a", "b"):
+        shutil.copytree(office, tmp_path / name / office.name)
+        dress_package(tmp_path / name / office.name)
+    a, b = tmp_path / "a" / office.name, tmp_path / "b" / office.name
+    for file in (GAUSSIANS, USD_PROXY):
+        assert (a / file).read_bytes() == (b / file).read_bytes() == (office / file).read_bytes()
+    dress_package(b, seed=1)
+    assert (a / GAUSSIANS).read_bytes() != (b / GAUSSIANS).read_bytes()
+    # the header is SuperSplat's, element for element and property for property
+    ours = _header(office / GAUSSIANS)
+    theirs = _header(shared_file(GUITAR))
+    assert [line for line in ours if not line.startswith("element")] == [
+        line for line in theirs if not line.startswith("element")
+    ]
+    assert [line.split()[1] for line in ours if line.startswith("element")] == [
+        line.split()[1] for line in theirs if line.startswith("element")
+    ]
+
+
+def _header(path: Path) -> list[str]:
+    head = path.read_bytes()[:4096]
+    return [line for line in head[: head.index(b"end_header")].decode().splitlines() if not line.startswith("comment")]
