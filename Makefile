@@ -37,11 +37,15 @@ demo: setup
 	SOURCE_DATE_EPOCH=1700000000 $(SONG) export-bench --run $(RUN) --bench $(BENCH) --version 1.0.0 --notes "make demo"
 	$(SONG) bench verify $(BENCH)
 	$(SONG) eval --bench $(BENCH) --policy straight --policy astar --policy social --out $(EVAL) --workers 2
+	# the vision baseline renders every step: a first slice of the release at 160x120 keeps the demo short
+	$(SONG) eval --bench $(BENCH) --policy depth --resolution 160x120 --limit 24 --out $(EVAL)-depth --workers 2
 	$(SONG) viz bench $(BENCH) --out $(FIGURES) --results $(EVAL)/straight.json --results $(EVAL)/astar.json --results $(EVAL)/social.json
 	$(SONG) viz scene $(SCENES)/procthor_house_6 --out $(FIGURES)/scene.png
 	$(SONG) viz crowd $(RUN) --scene procthor_house_6 --out $(FIGURES)
 	$(SONG) viz episode $(BENCH) --episode procthor_house_6-001 --results $(EVAL)/social.parquet --out $(FIGURES)
 	$(SONG) viz avatar --out $(FIGURES)/avatars.png --count 6
+	$(SONG) viz pov $(BENCH) --episode procthor_house_6-001 --policy depth --out $(FIGURES)
+	$(SONG) viz view $(SCENES)/procthor_house_6 --out $(FIGURES)/procthor_house_6-view.png
 	@echo "results: $(EVAL)/results.md  figures: $(FIGURES)/"
 
 test: setup

@@ -53,6 +53,10 @@ def sha256_json(obj: Any) -> str:
     return sha256_bytes(canonical_json(obj).encode("utf-8"))
 
 
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)  # read the process umask once (os.umask is the only way to read it)
+
+
 @contextmanager
 def atomic_writer(path: str | Path, mode: str = "wb") -> Iterator[io.IOBase]:
     """Open a temporary file next to ``path``; on success fsync it and rename it over ``path``.
@@ -63,6 +67,7 @@ def atomic_writer(path: str | Path, mode: str = "wb") -> Iterator[io.IOBase]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the result the usual permissions
     try:
         with os.fdopen(fd, mode) as handle:
             yield handle

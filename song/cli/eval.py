@@ -20,8 +20,11 @@ from song.runtime.params import apply_overrides
 @handle_errors
 def eval_command(
     bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
-    policy: list[str] = typer.Option(["social"], "--policy", help="straight | astar | social | module:Class"),
+    policy: list[str] = typer.Option(["social"], "--policy", help="straight | astar | social | depth | module:Class"),
     difficulty: str | None = typer.Option(None, "--difficulty", help="easy | medium | hard (default: all)"),
+    limit: int | None = typer.Option(
+        None, "--limit", min=1, help="only the first N episodes (in release order, after --difficulty)"
+    ),
     sensors: str | None = typer.Option(
         None, "--sensors", help="sensors shown besides the policy's own, comma-separated (state, scan, depth, rgb, ...)"
     ),
@@ -53,7 +56,9 @@ def eval_command(
     if resolution:
         width, height = parse_size(resolution, "--resolution")
         camera.update(width=width, height=height)
-    episodes = list(release.episodes(difficulty=difficulty)) if difficulty else None
+    episodes = list(release.episodes(difficulty=difficulty)) if difficulty or limit else None
+    if limit is not None:
+        episodes = episodes[:limit]
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:

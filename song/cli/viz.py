@@ -1,4 +1,4 @@
-"""``song viz scene|crowd|episode|bench``: pictures and videos."""
+"""``song viz scene|view|crowd|episode|pov|bench|avatar``: pictures and videos."""
 
 from __future__ import annotations
 
@@ -80,6 +80,23 @@ def episode(
     from song.viz.episode import render_episode
 
     _report(render_episode(bench, episode_id, out, results, video))
+
+
+@viz_app.command("pov")
+@handle_errors
+def pov(
+    bench: str = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
+    episode_id: str = typer.Option(..., "--episode", help="episode id"),
+    policy: str = typer.Option("depth", "--policy", help="straight | astar | social | depth | module:Class"),
+    out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
+    size: str = typer.Option("320x240", "--size", help="camera image size WxH, px"),
+    backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat"),
+) -> None:
+    """First-person video of a policy on an episode: RGB | depth | top-down (H.264) and a PNG strip."""
+    from song.cli.common import parse_size
+    from song.viz.pov import render_pov
+
+    _report(render_pov(bench, episode_id, policy, out, parse_size(size, "--size"), backend))
 
 
 @viz_app.command("bench")

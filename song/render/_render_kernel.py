@@ -103,9 +103,13 @@ def _sh_colour(sh, i, c, degree, x, y, z):
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
-def project_kernel(means, quats, scales, opacities, sh, degree, sel, rot, trans, campos,
+def project_kernel(means, quats, scales, opacities, log_alpha, sh, degree, sel, rot, trans, campos,
                    fx, fy, cx, cy, width, height, near, far, eps2d, offset, attr, depth, rect, valid):  # fmt: skip
-    """Project Gaussians ``sel`` of one set into rows ``offset + k`` of ``attr`` (N, N_ATTR), ``depth``, ``rect``."""
+    """Project Gaussians ``sel`` of one set into rows ``offset + k`` of ``attr`` (N, N_ATTR), ``depth``, ``rect``.
+
+    ``log_alpha`` is ln(255·opacity) per Gaussian (:meth:`GaussianSet.log_alpha_range`, computed once per
+    set): the σ beyond which α < 1/255.
+    """
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
     tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
@@ -164,7 +168,8 @@ def project_kernel(means, quats, scales, opacities, sh, degree, sel, rot, trans,
         o_i = float(opacities[i])
         if o_i < ALPHA_MIN:
             continue
-        extend = min(EXTEND_MAX, math.sqrt(2.0 * math.log(o_i / ALPHA_MIN)))
+        cut = float(log_alpha[i])
+        extend = min(EXTEND_MAX, math.sqrt(2.0 * cut))
         b = 0.5 * (cxx + cyy)
         r1 = extend * math.sqrt(b + math.sqrt(max(0.01, b * b - det)))
         rx = math.ceil(min(extend * math.sqrt(cxx), r1))
@@ -181,14 +186,18 @@ def project_kernel(means, quats, scales, opacities, sh, degree, sel, rot, trans,
         attr[o, Z] = z
         attr[o, BX], attr[o, BY] = rx, ry
         # α < 1/255 ⟺ σ > ln(255·o); the guard keeps rounding on the safe side (the α test decides)
-        attr[o, CUT] = math.log(o_i / ALPHA_MIN) + CUT_GUARD
+        attr[o, CUT] = cut + CUT_GUARD
         depth[o] = z
-        dx, dy, dz = px - campos[0], py - campos[1], pz - campos[2]
-        dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if dn > 0.0:
-            dx, dy, dz = dx / dn, dy / dn, dz / dn
-        for c in range(3):
-            attr[o, R + c] = max(_sh_colour(sh, i, c, degree, dx, dy, dz) + 0.5, 0.0)
+        if degree == 0:  # view-independent colour: no direction needed
+            for c in range(3):
+                attr[o, R + c] = max(C0 * sh[i, 0, c] + 0.5, 0.0)
+        else:
+            dx, dy, dz = px - campos[0], py - campos[1], pz - campos[2]
+            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if dn > 0.0:
+                dx, dy, dz = dx / dn, dy / dn, dz / dn
+            for c in range(3):
+                attr[o, R + c] = max(_sh_colour(sh, i, c, degree, dx, dy, dz) + 0.5, 0.0)
         # tiles holding a pixel centre within the box: columns u − rx − ½ … u + rx − ½ (a superset)
         rect[o, 0] = min(max(0, int(math.floor((u - rx - 0.5) / TILE))), tiles_x)
         rect[o, 1] = min(max(0, int(math.floor((u + rx - 0.5) / TILE)) + 1), tiles_x)
@@ -236,12 +245,15 @@ def bin_kernel(order, rect, tiles_x, tiles_y, n_parts):
     n_tiles = tiles_x * tiles_y
     n = order.shape[0]
     bounds = np.linspace(0, n, n_parts + 1).astype(np.int64)
+    sorted_rect = np.empty((n, 4), dtype=np.int32)  # one gather, then both passes read sequentially
+    for q in prange(n):
+        for c in range(4):
+            sorted_rect[q, c] = rect[order[q], c]
     counts = np.zeros((n_parts, n_tiles), dtype=np.int64)
     for k in prange(n_parts):
         for q in range(bounds[k], bounds[k + 1]):
-            g = order[q]
-            for ty in range(rect[g, 2], rect[g, 3]):
-                for tx in range(rect[g, 0], rect[g, 1]):
+            for ty in range(sorted_rect[q, 2], sorted_rect[q, 3]):
+                for tx in range(sorted_rect[q, 0], sorted_rect[q, 1]):
                     counts[k, ty * tiles_x + tx] += 1
     offsets = np.zeros(n_tiles + 1, dtype=np.int64)
     start = np.zeros((n_parts, n_tiles), dtype=np.int64)
@@ -257,8 +269,8 @@ def bin_kernel(order, rect, tiles_x, tiles_y, n_parts):
         fill = start[k]
         for q in range(bounds[k], bounds[k + 1]):
             g = order[q]
-            for ty in range(rect[g, 2], rect[g, 3]):
-                for tx in range(rect[g, 0], rect[g, 1]):
+            for ty in range(sorted_rect[q, 2], sorted_rect[q, 3]):
+                for tx in range(sorted_rect[q, 0], sorted_rect[q, 1]):
                     t = ty * tiles_x + tx
                     ids[fill[t]] = g
                     fill[t] += 1

@@ -45,6 +45,7 @@ class GaussianSet:
     opacities: np.ndarray
     sh: np.ndarray
     _bounds: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    _log_alpha: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         n = len(self.means)
@@ -118,6 +119,13 @@ class GaussianSet:
                 hi = np.maximum.reduceat(self.means + grow, starts, axis=0)
                 self._bounds = (lo.astype(np.float64), hi.astype(np.float64))
         return self._bounds
+
+    def log_alpha_range(self) -> np.ndarray:
+        """(N,) float64 ln(255·opacity): the Mahalanobis σ beyond which a Gaussian's α < 1/255 (cached)."""
+        if self._log_alpha is None:
+            with np.errstate(divide="ignore"):
+                self._log_alpha = np.log(np.asarray(self.opacities, dtype=np.float64) * 255.0)
+        return self._log_alpha
 
     def subset(self, index: np.ndarray) -> GaussianSet:
         """The Gaussians at ``index`` (a new set)."""

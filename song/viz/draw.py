@@ -1,11 +1,14 @@
-"""Shared drawing helpers: the map image, world→pixel mapping, colours, MP4 writing (OpenCV)."""
+"""Shared drawing helpers: the map image, world→pixel mapping, colours, PNG (OpenCV) and H.264 MP4 (PyAV)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from song.util import atomic_writer
 
 PALETTE = np.array(
     [
@@ -73,26 +76,42 @@ def write_png(path: str | Path, image: np.ndarray) -> Path:
     return path
 
 
-def write_mp4(path: str | Path, frames: list[np.ndarray], fps: float) -> Path:
-    """Write RGB frames as an MP4 (mp4v); dimensions are made even for the codec."""
-    import cv2
+def write_mp4(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> Path:
+    """Write RGB frames as an H.264 MP4 (yuv420p, what browsers play) through PyAV, atomically.
+
+    Dimensions are cropped to even numbers for the codec; x264 runs single-threaded so the same
+    frames give the same bytes.
+    """
+    from fractions import Fraction
+
+    import av
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    h, w = frames[0].shape[:2]
-    h2, w2 = h - h % 2, w - w % 2
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w2, h2))
-    if not writer.isOpened():
-        raise OSError(f"{path}: OpenCV could not open an MP4 writer")
-    for frame in frames:
-        writer.write(cv2.cvtColor(np.ascontiguousarray(frame[:h2, :w2]), cv2.COLOR_RGB2BGR))
-    writer.release()
+    with atomic_writer(path) as handle, av.open(handle, "w", format="mp4") as container:
+        stream = None
+        for frame in frames:
+            if stream is None:
+                h, w = frame.shape[0] - frame.shape[0] % 2, frame.shape[1] - frame.shape[1] % 2
+                stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1000))
+                stream.width, stream.height, stream.pix_fmt = w, h, "yuv420p"
+                stream.options = {"crf": "20", "preset": "medium", "threads": "1"}
+            video = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame[:h, :w]), format="rgb24")
+            container.mux(stream.encode(video))
+        if stream is None:
+            raise ValueError(f"{path}: no frames to write")
+        container.mux(stream.encode(None))
     return path
 
 
 def label(image: np.ndarray, text: str, at: tuple[int, int], rgb=(20, 20, 20), size: float = 0.4) -> None:
-    """Text with a white halo so it stays readable over any background."""
+    """Text with a white halo so it stays readable over any background.
+
+    The halo is the text itself drawn at one-pixel offsets (a thicker stroke would also widen
+    OpenCV's glyph advance and drift away from the text).
+    """
     import cv2
 
-    cv2.putText(image, text, at, cv2.FONT_HERSHEY_SIMPLEX, size, (255, 255, 255), 3, cv2.LINE_AA)
+    x, y = at
+    for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1), (0, -2), (0, 2), (-2, 0), (2, 0)):
+        cv2.putText(image, text, (x + dx, y + dy), cv2.FONT_HERSHEY_SIMPLEX, size, (255, 255, 255), 1, cv2.LINE_AA)
     cv2.putText(image, text, at, cv2.FONT_HERSHEY_SIMPLEX, size, rgb, 1, cv2.LINE_AA)

@@ -1,0 +1,72 @@
+"""The robot camera: posed avatars appear where the crowd put them, at their depth; sensors are deterministic."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from song.datasets.bench.types import AvatarBinding, PedestrianTrack, pedestrian_states
+from song.pipeline.motion import read_trajectories
+from song.render import robot_camera
+from song.runtime.robot import Pose
+from song.runtime.vision import SceneView
+from tests.pipeline.binding.test_stage import _bound, pool  # noqa: F401  (module-scoped pool fixture)
+from tests.runtime.helpers import episode, track
+
+W, H = 160, 120
+
+
+def _camera(ep, pose: Pose):
+    cam = ep.params.camera
+    return robot_camera(pose.x, pose.y, pose.yaw, cam.height_m, cam.hfov_deg, W, H, cam.near_m, cam.far_m)
+
+
+def _check_person_at(view: SceneView, ep, pose: Pose, t: float, xy: np.ndarray) -> None:
+    """The person standing at ``xy`` covers the pixel their body centre projects to, at its depth."""
+    out = view.render(pose, t, W, H)
+    camera = _camera(ep, pose)
+    uv, z = camera.project(np.array([[xy[0], xy[1], ep.params.camera.height_m]]))
+    j, i = int(uv[0, 0]), int(uv[0, 1])
+    assert 0 <= j < W and 0 <= i < H
+    assert out.alpha[i, j] > 0.9
+    assert abs(float(out.depth[i, j]) - float(z[0])) < 0.2  # a torso is ~0.25 m deep: front surface
+    # and nowhere else: columns well away from the body stay empty (no scene Gaussians here)
+    half_width_px = camera.fx * 0.6 / z[0]
+    far_cols = np.abs(np.arange(W) + 0.5 - uv[0, 0]) > half_width_px
+    assert out.alpha[:, far_cols].max() < 0.05
+
+
+def test_body_proxy_appears_at_its_projected_pixel() -> None:
+    ped = track(7, (4.0, 3.5), (4.0, 3.49), speed=0.01)  # standing still at (4, 3.5)
+    ep = episode(start=(1.0, 3.0), peds=[ped])
+    view = SceneView(backend="numba")
+    view.reset(ep)
+    _check_person_at(view, ep, Pose(1.0, 3.0, 0.0), 0.0, np.array([4.0, 3.5]))
+    behind = view.render(Pose(1.0, 3.0, np.pi), 0.0, W, H)  # facing away: nobody
+    assert behind.alpha.max() < 0.05
+
+
+def test_lbs_posed_avatar_appears_where_the_crowd_put_it(make_scene, tmp_path: Path, pool) -> None:  # noqa: F811
+    ctx = _bound(make_scene, tmp_path, pool)
+    bindings = json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]
+    tracks = [PedestrianTrack(t.ped_id, t.t, t.xy, t.yaw) for t in read_trajectories(ctx.scene_dir / "crowd.parquet")]
+    avatars = [
+        AvatarBinding(b["ped_id"], b["avatar_id"], Path(b["asset_path"]), ctx.scene_dir / b["cache_file"])
+        for b in bindings
+    ]
+    ped = tracks[0]
+    ep = replace(episode(peds=[ped]), avatars=[a for a in avatars if a.ped_id == ped.ped_id])
+    view = SceneView(backend="numba")
+    view.reset(ep)
+    t = float(ped.t[len(ped.t) // 2])
+    _, xy, _ = pedestrian_states([ped], t)
+    # stand 3 m from the person, looking at them
+    heading = 0.7
+    pose = Pose(xy[0, 0] - 3.0 * np.cos(heading), xy[0, 1] - 3.0 * np.sin(heading), heading)
+    _check_person_at(view, ep, pose, t, xy[0])
+    again = SceneView(backend="numba")
+    again.reset(ep)
+    assert (again.render(pose, t, W, H).rgb == view.render(pose, t, W, H).rgb).all()
