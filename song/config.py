@@ -39,7 +39,10 @@ class IntentsConfig(_Section):
     llm: Literal["auto", "offline", "gemini", "openai"] = Field(
         "auto", description="auto = gemini when a key is set, else offline"
     )
-    gemini_model: str = Field("gemini-3-flash-preview", description="closest listed model to 'Gemini 3.1 Flash'")
+    gemini_model: str = Field(
+        "gemini-3.5-flash",
+        description="a stable Gemini model id of the v1beta API (docs/quickstart.md, Intents with an LLM)",
+    )
     openai_base_url: str = Field("http://127.0.0.1:8000/v1", description="OpenAI-compatible server")
     openai_model: str = Field("local-model", description="model name sent to the OpenAI-compatible server")
     timeout_s: float = Field(60.0, gt=0.0, description="per-request timeout, s")
@@ -96,7 +99,10 @@ class MotionConfig(_Section):
     kimodo_steps: int = Field(100, ge=1, le=1000, description="Kimodo DDIM denoising steps")
     kimodo_batch_size: int = Field(16, ge=1, le=256, description="pedestrians per batched Kimodo call")
     kimodo_max_frames: int = Field(
-        300, ge=30, le=2000, description="longest single Kimodo segment, frames; longer tracks use multi-prompt"
+        300,
+        ge=30,
+        le=300,
+        description="longest generated Kimodo window, frames (its 10 s limit); longer tracks use multi-prompt",
     )
     kimodo_postprocess: bool = Field(True, description="also run Kimodo's own foot-skate post-processing")
     kimodo_embedding_cache: str = Field(

@@ -9,6 +9,7 @@ import hashlib
 import io
 import json
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -51,6 +52,25 @@ def read_json_object(path: str | Path) -> dict[str, Any]:
 def sha256_json(obj: Any) -> str:
     """Hex sha256 of :func:`canonical_json` of ``obj``."""
     return sha256_bytes(canonical_json(obj).encode("utf-8"))
+
+
+SAFE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,127}")  # ids that become path components
+
+
+def check_id(value: object, what: str) -> str:
+    """``value`` if it is a safe path component (1–128 of ``[A-Za-z0-9_.-]``, no leading dot, no ``..``).
+
+    Every id that names a file or folder (scene, avatar, episode ids, release versions) goes through
+    this one rule, matched in full (a trailing newline is refused too).
+
+    Raises:
+        SongError: one line naming ``what`` and the offending value.
+    """
+    from song.errors import SongError
+
+    if not isinstance(value, str) or not SAFE_ID.fullmatch(value) or ".." in value:
+        raise SongError(f"{what} {value!r}: must be 1-128 of [A-Za-z0-9_.-], starting with a letter or digit, no '..'")
+    return value
 
 
 _UMASK = os.umask(0o022)

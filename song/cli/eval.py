@@ -34,6 +34,9 @@ def eval_command(
     render_backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat"),
     out: Path = typer.Option(Path("runs/eval"), "--out", help="results folder"),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
+    step_timeout: float = typer.Option(
+        5.0, "--step-timeout", min=0.01, help="a policy call taking longer fails its episode (outcome error), s"
+    ),
     config: Path | None = ConfigOption,
     sets: list[str] | None = SetOption,
     override: bool = typer.Option(
@@ -62,7 +65,7 @@ def eval_command(
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:
-        setup = make_setup(release, name, sensors, params, changed, camera)
+        setup = make_setup(release, name, sensors, params, changed, camera, step_timeout)
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:

@@ -242,6 +242,7 @@ def run_scene(
     folder = RunFolder(run_dir).scene(scene.scene_id)
     folder.root.mkdir(parents=True, exist_ok=True)
     record = read_json_object(folder.stages)
+    scene_files = scene.content_hash()  # what the stages read (checked again by export-bench)
     result = SceneResult(scene_id=scene.scene_id, status="skipped")
     for stage in stages:
         input_hash = stage_input_hash(stage, scene, config, record)
@@ -253,6 +254,9 @@ def run_scene(
         ):
             result.stages[stage.name] = "skipped"
             result.totals.update(previous.get("totals", {}))
+            if previous.get("scene") != scene_files:  # a run from before scene hashes were recorded
+                previous["scene"] = scene_files  # the input hash matched, so these are the files it read
+                write_json_atomic(folder.stages, record)
             continue
         ctx = StageContext(scene=scene, scene_dir=folder.root, run_dir=run_dir, config=config, stage=stage.name)
         start = time.perf_counter()
@@ -276,7 +280,7 @@ def run_scene(
         seconds = time.perf_counter() - start
         outputs = {rel: sha256_file(folder.path(rel)) for rel in sorted(output.files)}
         # Timings are kept out of stages.json so that run folders are byte-identical across runs.
-        record[stage.name] = {"status": "ok", "input_hash": input_hash, "outputs": outputs}
+        record[stage.name] = {"status": "ok", "input_hash": input_hash, "outputs": outputs, "scene": scene_files}
         if output.totals:
             record[stage.name]["totals"] = dict(sorted(output.totals.items()))
         write_json_atomic(folder.stages, record)

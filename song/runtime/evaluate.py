@@ -23,6 +23,7 @@ from song.datasets.bench.schema import DIFFICULTIES
 from song.datasets.bench.types import RuntimeParams
 from song.parallel import parallel_map
 from song.runtime.avatars import make_collider
+from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.loop import EpisodeResult, run_episode
 from song.runtime.metrics import aggregate, markdown_table
 from song.runtime.policies import load_policy, policy_sensors
@@ -48,6 +49,7 @@ RESULTS_SCHEMA = pa.schema(
         ("jerk", pa.float64()),
         ("trajectory", pa.list_(pa.list_(pa.float64(), 3))),
         ("events", pa.list_(pa.struct([("step", pa.int32()), ("kind", pa.string())]))),
+        ("error", pa.string()),
     ]
 )
 
@@ -62,6 +64,7 @@ class EvalSetup:
         params: the effective runtime parameters.
         overrides: ``{"robot.max_speed_mps": [release value, used value], ...}``; empty for official runs.
         sensor_options: per-sensor keyword options.
+        step_timeout_s: the longest one ``reset``/``act`` call may take before its episode fails.
     """
 
     policy: str
@@ -69,6 +72,7 @@ class EvalSetup:
     params: RuntimeParams
     overrides: dict[str, list[Any]] = field(default_factory=dict)
     sensor_options: dict[str, dict] = field(default_factory=dict)
+    step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S
 
 
 def make_setup(
@@ -78,6 +82,7 @@ def make_setup(
     params: RuntimeParams | None = None,
     overrides: dict[str, list[Any]] | None = None,
     camera: dict[str, Any] | None = None,
+    step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
 ) -> EvalSetup:
     """The setup of one policy.
 
@@ -88,10 +93,11 @@ def make_setup(
         params: runtime parameters (default: the release's).
         overrides: what ``params`` changed from the release, as recorded.
         camera: options shared by the camera sensors: ``width``, ``height``, ``backend``.
+        step_timeout_s: per-call time limit of the policy (its episode fails past it).
     """
     names = parse_sensor_names([*policy_sensors(load_policy(policy)), *parse_sensor_names(sensors or [])])
     options = {"camera": dict(camera)} if camera else {}
-    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options)
+    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options, step_timeout_s)
 
 
 @dataclass(frozen=True)
@@ -110,7 +116,8 @@ def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  
     setup = job.setup
     episode = dataclasses.replace(bench.episode(job.episode_id), params=setup.params)
     sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
-    return run_episode(episode, load_policy(setup.policy), make_collider(episode), sensors)
+    policy = load_policy(setup.policy)
+    return run_episode(episode, policy, make_collider(episode), sensors, step_timeout_s=setup.step_timeout_s)
 
 
 def iter_eval(
@@ -147,6 +154,7 @@ def results_table(results: list[EpisodeResult], policy: str) -> pa.Table:
                 "jerk": m.jerk,
                 "trajectory": r.trajectory.tolist(),
                 "events": [{"step": step, "kind": kind} for step, kind in r.events],
+                "error": r.error,
             }
         )
     return pa.Table.from_pylist(rows, RESULTS_SCHEMA)
@@ -178,6 +186,7 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
         "params": setup.params.to_json(),
         "overrides": setup.overrides,
         "official": not setup.overrides,
+        "step_timeout_s": setup.step_timeout_s,
     }
 
 

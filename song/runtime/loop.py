@@ -5,7 +5,8 @@ Static contact restores the last safe pose and counts C_obs (at δ_obs the episo
 that has not moved for ``stuck_steps`` steps is also turned toward the most open direction of its
 field of view. Any avatar collision (more than η_col Gaussian centres inside the robot volume) fails
 the episode. Success when the goal is closer than the goal radius. Otherwise a time-out after T_max
-steps. Exactly one outcome per episode. Every parameter comes from ``episode.params`` (the release's
+steps; a policy that fails (raises, exits, runs too long, returns no command) ends it as ``error``.
+Exactly one outcome per episode. Every parameter comes from ``episode.params`` (the release's
 recorded values, or explicit overrides).
 """
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from song.datasets.bench.types import Episode, pedestrian_states
 from song.runtime.avatars import AvatarCollider
+from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S, PolicyFailure, as_command, call_policy, frozen_copy
 from song.runtime.metrics import EpisodeMetrics, episode_metrics
 from song.runtime.policies import Policy, policy_sensors
 from song.runtime.robot import Pose, clamp_command, integrate
@@ -44,6 +46,7 @@ class EpisodeResult:
     nearest: np.ndarray  # (K,) nearest-avatar horizontal distance per pose, m
     metrics: EpisodeMetrics
     events: list[tuple[int, str]] = field(default_factory=list)
+    error: str = ""  # why the policy failed the episode (outcome "error")
 
 
 def _most_open_yaw(pose: Pose, world: StaticWorld, fov: float) -> float:
@@ -73,6 +76,7 @@ class EpisodeRunner:
         self.poses = [self.pose]
         self.nearest = [self._nearest(self.time)]
         self.events: list[tuple[int, str]] = []
+        self.error = ""
         self.sensors.reset(episode)
 
     @property
@@ -126,6 +130,12 @@ class EpisodeRunner:
             self.outcome = "timeout"
         return self.outcome
 
+    def fail(self, reason: str) -> None:
+        """End the episode because the policy failed (outcome ``error``, the reason recorded)."""
+        self.outcome = "error"
+        self.error = reason
+        self.events.append((self.step_index, "policy_error"))
+
     def result(self) -> EpisodeResult:
         """The episode's outcome, log and metrics (once it has ended)."""
         if self.outcome is None:
@@ -154,6 +164,7 @@ class EpisodeRunner:
             nearest,
             metrics,
             self.events,
+            self.error,
         )
 
 
@@ -163,17 +174,24 @@ def run_episode(
     collider: AvatarCollider,
     sensors: SensorSuite | None = None,
     on_step: Callable[[EpisodeRunner], None] | None = None,
+    step_timeout_s: float | None = DEFAULT_STEP_TIMEOUT_S,
 ) -> EpisodeResult:
     """Run ``policy`` on ``episode`` until it ends; deterministic for a deterministic policy.
 
     ``sensors`` defaults to the ones the policy declares (:func:`song.runtime.policies.policy_sensors`).
+    The policy sees a read-only copy of the episode; if it raises, exits, runs past ``step_timeout_s``
+    in one call or returns a malformed command, this episode ends with outcome ``error`` and the reason
+    (:mod:`song.runtime.guard`).
     """
     sensors = sensors or SensorSuite.build(policy_sensors(policy), episode.params, max(64, len(episode.pedestrians)))
     runner = EpisodeRunner(episode, collider, sensors)
-    policy.reset(episode)
-    while runner.outcome is None:
-        v, omega = policy.act(runner.observation())
-        runner.step(v, omega)
-        if on_step is not None:
-            on_step(runner)
+    try:
+        call_policy(policy.reset, frozen_copy(episode), what="reset()", timeout_s=step_timeout_s)
+        while runner.outcome is None:
+            action = call_policy(policy.act, runner.observation(), what="act()", timeout_s=step_timeout_s)
+            runner.step(*as_command(action))
+            if on_step is not None:
+                on_step(runner)
+    except PolicyFailure as exc:
+        runner.fail(str(exc))
     return runner.result()

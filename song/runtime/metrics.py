@@ -2,7 +2,8 @@
 
 Choices (also in docs/metrics.md):
 - Every episode has exactly one outcome: success, obstacle (C_obs ≥ δ_obs), human (any avatar
-  collision) or timeout, so SR + CR_obs + CR_hum + TO = 100 %.
+  collision), timeout, or error (the policy failed: raised, exited, ran past its time limit), so
+  SR + CR_obs + CR_hum + TO + ERR = 100 % (ERR is shown only when a policy failed).
 - SPL = S·L*/max(L, L*), STL = S·T*/max(T, T*), with L the robot's travelled length and T its time.
 - Distances to people are horizontal, robot centre to avatar root. PSC is the fraction of an
   episode's steps whose nearest-avatar distance is ≥ 0.5 m (steps with nobody present count as
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-OUTCOMES = ("success", "obstacle", "human", "timeout")
+OUTCOMES = ("success", "obstacle", "human", "timeout", "error")
 
 
 def spl(success: np.ndarray, length: np.ndarray, optimal_length: np.ndarray) -> np.ndarray:
@@ -114,7 +115,7 @@ def aggregate(episodes: Sequence[EpisodeMetrics]) -> dict[str, float]:
     if n == 0:
         return {
             key: float("nan")
-            for key in ("n", "SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "MinD", "JK")
+            for key in ("n", "SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "MinD", "JK", "ERR")
         }
     outcome = np.array([e.outcome for e in episodes])
     success = (outcome == "success").astype(np.float64)
@@ -133,6 +134,7 @@ def aggregate(episodes: Sequence[EpisodeMetrics]) -> dict[str, float]:
         "PSC": 100.0 * float(np.mean([e.psc for e in episodes])),
         "MinD": float(min_d[finite].mean()) if finite.any() else float("nan"),
         "JK": float(np.mean([e.jerk for e in episodes])),
+        "ERR": 100.0 * np.mean(outcome == "error"),
     }
 
 
@@ -141,10 +143,12 @@ METRIC_COLUMNS = ("SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "
 
 def markdown_table(rows: dict[str, dict[str, dict[str, float]]]) -> str:
     """The paper's Table 2 layout: one row per (policy, difficulty), metric columns."""
-    header = "| policy | difficulty | n | " + " | ".join(METRIC_COLUMNS) + " |"
-    lines = [header, "|" + "---|" * (3 + len(METRIC_COLUMNS))]
+    failed = any(v.get("ERR", 0.0) > 0 for by in rows.values() for v in by.values())
+    columns = METRIC_COLUMNS + (("ERR",) if failed else ())
+    header = "| policy | difficulty | n | " + " | ".join(columns) + " |"
+    lines = [header, "|" + "---|" * (3 + len(columns))]
     for policy, by_difficulty in rows.items():
         for difficulty, values in by_difficulty.items():
-            cells = [f"{values[c]:.2f}" if np.isfinite(values[c]) else "–" for c in METRIC_COLUMNS]
+            cells = [f"{values[c]:.2f}" if np.isfinite(values[c]) else "–" for c in columns]
             lines.append(f"| {policy} | {difficulty} | {int(values['n'])} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -241,8 +241,14 @@ class CameraSensor(Sensor):
         self.scene_view.reset(episode)
 
     def frame(self, view: RobotView):
-        """The rendered view at this step (one render shared by every camera sensor of the suite)."""
-        return self.scene_view.render(view.pose, view.t, self.width, self.height)
+        """The rendered view at this step (one render shared by every camera sensor of the suite).
+
+        Its arrays are read-only: every sensor and the policy see the same pixels.
+        """
+        out = self.scene_view.render(view.pose, view.t, self.width, self.height)
+        for array in (out.rgb, out.depth, out.alpha):
+            array.setflags(write=False)
+        return out
 
     def _rgb_space(self) -> Box:
         return Box(0, 255, (self.height, self.width, 3), np.uint8)

@@ -68,7 +68,7 @@ def test_mixed_folder_reports_each_bad_package_and_fails(make_scene, tmp_path: P
     expected = {
         "bad_version": ("semantic_map.json: version", "unsupported version 3"),
         "no_occupancy": ("occupancy.png", "file is missing"),
-        "bad_ply": ("3dgs_compressed.ply: vertex", "early end-of-file"),
+        "bad_ply": ("3dgs_compressed.ply: vertex", "truncated"),
     }
     for name, (where, what) in expected.items():
         (line,) = [line for line in failed if line.startswith(f"FAILED {name}: ")]

@@ -31,7 +31,7 @@ import numpy as np
 from song.datasets.scenes.ply import GaussianCloud, read_gaussian_ply, write_standard_ply
 from song.errors import FormatError
 from song.geometry.skeleton import N_JOINTS
-from song.util import canonical_json, write_npz_atomic
+from song.util import canonical_json, check_id, write_npz_atomic
 
 FORMAT = "song.avatar/1"
 SUFFIX = ".avatar.npz"
@@ -129,7 +129,7 @@ def save_avatar(asset: AvatarAsset, folder: str | Path) -> Path:
     Raises:
         FormatError: the asset breaks the format (see :func:`validate_avatar`).
     """
-    path = Path(folder) / f"{asset.avatar_id}{SUFFIX}"
+    path = Path(folder) / f"{check_id(asset.avatar_id, 'avatar id')}{SUFFIX}"
     validate_avatar(asset, path)
     arrays = asset_arrays(asset)
     meta = _full_meta(asset, arrays)

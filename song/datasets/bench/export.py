@@ -37,10 +37,11 @@ from song.datasets.bench.schema import (
     SCENES_PATH,
 )
 from song.datasets.run import RunFolder, RunInfo, read_bindings, read_crowd_table, read_intents, read_run_info
+from song.datasets.run.integrity import check_scene_unchanged
 from song.datasets.run.layout import AMASS_FILE, MOTION_META_FILE
 from song.datasets.scenes.package import GAUSSIANS, SEMANTIC_MAP, USD_PROXY, load_scene_package
 from song.errors import BenchmarkError, SongError
-from song.util import read_json_object, sha256_bytes, sha256_file, write_json_atomic
+from song.util import canonical_json, read_json_object, sha256_bytes, sha256_file, write_json_atomic
 
 
 @dataclass(frozen=True)
@@ -198,9 +199,15 @@ def manifest_rows(release: Path, rows_by_path: dict[str, int]) -> list[dict[str,
     return rows
 
 
-def fingerprint_of(rows: list[dict[str, Any]]) -> str:
-    """sha256 of the sorted manifest's canonical text (``path sha256 bytes`` per line)."""
+def fingerprint_of(rows: list[dict[str, Any]], info: dict[str, Any] | None = None) -> str:
+    """sha256 of the sorted manifest's canonical text (``path sha256 bytes`` per line) and of ``info``.
+
+    ``info`` is ``meta/info.json`` as a dict without its ``fingerprint`` field (releases of schema 1.2
+    and later), so editing the recorded robot, camera or collision parameters breaks the fingerprint.
+    """
     text = "".join(f"{r['path']}\t{r['sha256']}\t{r['bytes']}\n" for r in sorted(rows, key=lambda r: r["path"]))
+    if info is not None:
+        text += f"{INFO_PATH}\t{canonical_json({k: v for k, v in info.items() if k != 'fingerprint'})}\n"
     return sha256_bytes(text.encode("utf-8"))
 
 
@@ -229,7 +236,7 @@ def export_bench(
         BenchmarkError: bad version string, existing version, missing parent, or missing run outputs.
     """
     run_dir, bench_dir = Path(run_dir), Path(bench_dir)
-    if not SEMVER.match(version):
+    if not SEMVER.fullmatch(version):
         raise BenchmarkError(f"version '{version}': expected a semantic version X.Y.Z")
     target = bench_dir / version
     if target.exists():
@@ -251,6 +258,7 @@ def export_bench(
         pedestrians = _pedestrian_table(run, scene_ids)
         avatar_rows, scene_rows = [], []
         for scene_id in scene_ids:
+            check_scene_unchanged(run.scene(scene_id), run_info.scenes_dir / scene_id)
             mask = pc.equal(pedestrians.column("scene_id"), scene_id)
             ped_ids = sorted(set(pedestrians.filter(mask).column("ped_id").to_pylist()))
             avatar_rows += _avatar_rows(run, scene_id, ped_ids, blobs, amass)
@@ -276,7 +284,6 @@ def export_bench(
         (tmp / CHANGELOG_PATH).write_text(_changelog(version, parent, notes, counts), encoding="utf-8")
         manifest = manifest_rows(tmp, rows_by_path)
         write_parquet(tmp / MANIFEST_PATH, pa.Table.from_pylist(manifest, MANIFEST), MANIFEST, "manifest", version)
-        fingerprint = fingerprint_of(manifest)
         info = Info(
             dataset_version=version,
             parent=parent,
@@ -300,8 +307,10 @@ def export_bench(
                 name: TableInfo(path=rel, rows=rows_by_path[rel], columns=list(schema.names))
                 for name, (rel, _, schema) in tables.items()
             },
-            fingerprint=fingerprint,
+            fingerprint="",
         )
+        fingerprint = fingerprint_of(manifest, info.model_dump(mode="json"))
+        info = info.model_copy(update={"fingerprint": fingerprint})
         write_json_atomic(tmp / INFO_PATH, info.model_dump(mode="json"))
         n_bytes = sum(p.stat().st_size for p in tmp.rglob("*") if p.is_file())
         os.replace(tmp, target)  # atomic on one file system; fails if target appeared meanwhile

@@ -14,7 +14,7 @@ from song.datasets.bench.schema import FORMAT_NAME, SCHEMA_VERSION, schema_major
 from song.datasets.bench.types import RuntimeParams
 from song.errors import BenchmarkError, SchemaVersionError
 
-SEMVER = re.compile(r"^(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)$")
+SEMVER = re.compile(r"(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)")  # always matched in full
 
 
 class Generator(BaseModel):
@@ -57,12 +57,12 @@ class Info(BaseModel):
     )
     counts: dict[str, Any]
     tables: dict[str, TableInfo]
-    fingerprint: str = Field(..., description="sha256 of the sorted manifest (every file but info.json)")
+    fingerprint: str = Field(..., description="sha256 of the sorted manifest and of this file without this field")
 
     @field_validator("dataset_version", "schema_version")
     @classmethod
     def _semver(cls, value: str) -> str:
-        if not SEMVER.match(value):
+        if not SEMVER.fullmatch(value):
             raise ValueError("expected a semantic version X.Y.Z")
         return value
 
@@ -108,7 +108,11 @@ def read_info(path: Path) -> Info:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise BenchmarkError(f"{path}: cannot read release info: {exc}") from exc
-    if isinstance(data, dict) and isinstance(data.get("schema_version"), str) and SEMVER.match(data["schema_version"]):
+    if (
+        isinstance(data, dict)
+        and isinstance(data.get("schema_version"), str)
+        and SEMVER.fullmatch(data["schema_version"])
+    ):
         check_schema_version(data["schema_version"], path)
     try:
         return Info.model_validate(data)

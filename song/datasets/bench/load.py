@@ -6,6 +6,7 @@ Reads only the release's own files; never imports ``song.pipeline``.
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
@@ -25,15 +26,26 @@ from song.datasets.bench.schema import (
     SCENES_PATH,
 )
 from song.datasets.bench.types import AvatarBinding, Episode, PedestrianTrack, RuntimeParams, StaticMap
+from song.datasets.limits import check_png_size, limits, over
 from song.errors import BenchmarkError
+from song.util import sha256_file
+
+BLOB_ADDRESS = re.compile(r"blobs/sha256/([0-9a-f]{2})/([0-9a-f]{64})(\.[A-Za-z0-9]{1,8}){0,2}")
 
 
 class Benchmark:
-    """An opened release. Tables are read once; per-scene data is decoded on first use and cached."""
+    """An opened release. Tables are read once; per-scene data is decoded on first use and cached.
+
+    A release is untrusted input: every path it names must stay inside its folder (symbolic links
+    included), a blob is used only under its content address and only after its sha256 was checked
+    (once per process), and sizes are bounded before decoding (:mod:`song.datasets.limits`).
+    """
 
     def __init__(self, root: Path) -> None:
         self.root = root
-        self.info: Info = read_info(root / INFO_PATH)
+        self._real_root = root.resolve()
+        self._verified: set[Path] = set()
+        self.info: Info = read_info(self._inside(INFO_PATH, "release info"))
         self.params: RuntimeParams = runtime_params(self.info, root / INFO_PATH)
         self.episodes_table = self._read(EPISODES_PATH.format(part=0))
         self.scenes_table = self._read(SCENES_PATH)
@@ -57,9 +69,19 @@ class Benchmark:
         counts = table.group_by("scene_id").aggregate([("ped_id", "count_distinct")])
         return int(max(counts.column("ped_id_count_distinct").to_pylist()))
 
+    def _inside(self, rel: str, what: str) -> Path:
+        """``root / rel`` resolved, refused when it leaves the release (``..``, absolute, symlinks)."""
+        path = (self.root / rel).resolve()
+        if not path.is_relative_to(self._real_root):
+            raise BenchmarkError(f"{self.root}: {what} {rel!r} resolves outside the release ({path})")
+        return path
+
     def _read(self, rel: str):
-        path = self.root / rel
+        path = self._inside(rel, "table")
         try:
+            rows = pq.read_metadata(path).num_rows
+            if rows > limits().max_table_rows:
+                raise over(path, "", "row count", rows, "max_table_rows")
             table = pq.read_table(path)
         except (OSError, ValueError) as exc:
             raise BenchmarkError(f"{path}: cannot read table: {exc}") from exc
@@ -70,8 +92,24 @@ class Benchmark:
         return table
 
     def blob(self, ref: dict | None) -> Path | None:
-        """Absolute path of a blob reference ``{path, sha256, bytes}`` (None stays None)."""
-        return None if not ref else self.root / ref["path"]
+        """Path of a blob reference ``{path, sha256, bytes}`` after checking it (None stays None).
+
+        Raises:
+            BenchmarkError: the path is not the content address of its sha256, leaves the release, or
+                the file's size or sha256 differs from the reference.
+        """
+        if not ref:
+            return None
+        rel, digest = ref.get("path"), ref.get("sha256")
+        match = BLOB_ADDRESS.fullmatch(rel) if isinstance(rel, str) else None
+        if match is None or match.group(2) != digest or match.group(1) != digest[:2]:
+            raise BenchmarkError(f"{self.root}: blob path {rel!r} is not the content address of sha256 {digest!r}")
+        path = self._inside(rel, "blob path")
+        if path not in self._verified:
+            if not path.is_file() or path.stat().st_size != ref.get("bytes") or sha256_file(path) != digest:
+                raise BenchmarkError(f"{self.root / rel}: missing or altered blob; run `song bench verify`")
+            self._verified.add(path)
+        return path
 
     def _static_map(self, scene_id: str) -> StaticMap:
         import cv2
@@ -79,8 +117,12 @@ class Benchmark:
         row = self._scenes.get(scene_id)
         if row is None:
             raise BenchmarkError(f"{self.root}: scene '{scene_id}' is not in this release")
-        data = np.fromfile(self.blob(row["occupancy"]), dtype=np.uint8)
-        cells = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        path = self.blob(row["occupancy"])
+        raw = path.read_bytes()
+        check_png_size(raw, path)  # before decoding
+        cells = cv2.imdecode(np.frombuffer(raw, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        if cells is None or cells.ndim != 2 or cells.dtype != np.uint8:
+            raise BenchmarkError(f"{path}: occupancy is not an 8-bit single-channel PNG")
         return StaticMap(cells=cells, resolution=float(row["resolution"]), origin=tuple(row["origin"]))
 
     def _pedestrians(self, scene_id: str) -> tuple[PedestrianTrack, ...]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -9,7 +10,7 @@ from typing import Any
 import pyarrow.parquet as pq
 
 from song.datasets.bench.info import SEMVER, Info, read_info, version_key
-from song.datasets.bench.schema import EPISODES_PATH, INFO_PATH, MANIFEST_PATH
+from song.datasets.bench.schema import EPISODES_PATH, INFO_FINGERPRINT_SINCE, INFO_PATH, MANIFEST_PATH
 from song.errors import BenchmarkError
 from song.util import sha256_file, sha256_json
 
@@ -19,7 +20,9 @@ def list_versions(bench_dir: str | Path) -> list[str]:
     bench_dir = Path(bench_dir)
     if not bench_dir.is_dir():
         raise BenchmarkError(f"{bench_dir}: benchmark folder is missing")
-    found = [p.name for p in bench_dir.iterdir() if p.is_dir() and SEMVER.match(p.name) and (p / INFO_PATH).is_file()]
+    found = [
+        p.name for p in bench_dir.iterdir() if p.is_dir() and SEMVER.fullmatch(p.name) and (p / INFO_PATH).is_file()
+    ]
     return sorted(found, key=version_key)
 
 
@@ -61,17 +64,24 @@ def verify_release(release: str | Path) -> VerifyReport:
         manifest = pq.read_table(release / MANIFEST_PATH).to_pylist()
     except (OSError, ValueError) as exc:
         return VerifyReport(info.dataset_version, False, altered=[MANIFEST_PATH + f" ({exc})"])
-    report = VerifyReport(info.dataset_version, fingerprint_of(manifest) == info.fingerprint)
+    covered = version_key(info.schema_version) >= INFO_FINGERPRINT_SINCE
+    raw = json.loads((release / INFO_PATH).read_text(encoding="utf-8")) if covered else None
+    report = VerifyReport(info.dataset_version, fingerprint_of(manifest, raw) == info.fingerprint)
     listed = {row["path"]: row for row in manifest}
+    real_root = release.resolve()
     for rel, row in listed.items():
         path = release / rel
-        if not path.is_file():
+        if not path.resolve().is_relative_to(real_root):  # `..`, absolute or a symlink leaving the release
+            report.altered.append(f"{rel} (resolves outside the release; not read)")
+        elif not path.is_file():
             report.missing.append(rel)
         elif path.stat().st_size != row["bytes"] or sha256_file(path) != row["sha256"]:
             report.altered.append(rel)
     for path in sorted(release.rglob("*")):
         rel = path.relative_to(release).as_posix()
-        if path.is_file() and rel not in listed and rel not in (INFO_PATH, MANIFEST_PATH):
+        if path.is_symlink() and not path.resolve().is_relative_to(real_root) and rel not in listed:
+            report.extra.append(f"{rel} (symlink leaving the release)")
+        elif path.is_file() and rel not in listed and rel not in (INFO_PATH, MANIFEST_PATH):
             report.extra.append(rel)
     return report
 

@@ -7,14 +7,14 @@ or the other files live in :mod:`song.datasets.scenes.package`.
 from __future__ import annotations
 
 import math
-import re
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from song.util import SAFE_ID
+
 FORMAT_NAME = "song.semantic_map"
 FORMAT_VERSION = 1
-SCENE_ID_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 VENUE_TYPES = (
     "office",
     "lobby",
@@ -189,7 +189,7 @@ class SemanticMap(_Model):
     @field_validator("scene_id")
     @classmethod
     def _scene_id(cls, value: str) -> str:
-        if not SCENE_ID_PATTERN.match(value) or ".." in value:
+        if not SAFE_ID.fullmatch(value) or ".." in value:
             raise ValueError("scene id must be 1-128 of [A-Za-z0-9_.-], no path separators or '..'")
         return value
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from song.datasets.limits import check_png_size
 from song.errors import SceneError
 from song.geometry.grid import cell_to_world, sample_mask, world_to_cell
 
@@ -66,8 +67,10 @@ def read_occupancy_png(path: str | Path, resolution: float, origin: tuple[float,
     path = Path(path)
     if not path.is_file():
         raise SceneError(path, "", "file is missing")
-    data = np.frombuffer(path.read_bytes(), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    raw = path.read_bytes()
+    check_png_size(raw, path, SceneError)  # before decoding: a small file may declare a huge image
+    data = np.frombuffer(raw, dtype=np.uint8)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if image is None:
         raise SceneError(path, "", "not a readable PNG image")
     if image.ndim != 2 or image.dtype != np.uint8:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import ValidationError
 
+from song.datasets.limits import load_json
 from song.datasets.scenes.model import SemanticMap
 from song.datasets.scenes.occupancy import OccupancyGrid, encode_occupancy_png, read_occupancy_png
 from song.errors import FormatError, SceneError
@@ -74,14 +75,7 @@ def parse_semantic_map(path: Path) -> SemanticMap:
     """Read and structurally validate ``semantic_map.json``."""
     if not path.is_file():
         raise SceneError(path, "", "file is missing")
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise SceneError(path, "", f"not UTF-8 text (byte {exc.start})") from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise SceneError(path, "", f"not valid JSON: {exc.msg} at line {exc.lineno}") from exc
+    data = load_json(path, error=SceneError)
     if not isinstance(data, dict):
         raise SceneError(path, "", "expected a JSON object at the top level")
     try:

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from song.datasets.limits import limits, over
 from song.errors import FormatError
 from song.util import write_bytes_atomic
 
@@ -68,11 +69,53 @@ class GaussianCloud:
         return int(self.means.shape[0])
 
 
+PLY_TYPES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+             "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}  # fmt: skip
+MAX_HEADER_BYTES = 65_536
+
+
+def _check_header(path: Path) -> None:
+    """Refuse, before plyfile reads anything, a header whose declared body cannot be in the file.
+
+    Lists (never in a Gaussian PLY; a list of 10⁹ rows makes plyfile loop row by row), element counts
+    above ``max_splats`` and binary bodies larger than the file are refused with one line.
+    """
+    with path.open("rb") as handle:
+        head = handle.read(MAX_HEADER_BYTES)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        raise FormatError(
+            path, "header", f"not a readable PLY (no 'ply' … 'end_header' in its first {MAX_HEADER_BYTES} bytes)"
+        )
+    body = path.stat().st_size - (head.index(b"\n", end) + 1 if b"\n" in head[end:] else len(head))
+    binary, needed, element, short = False, 0, None, None
+    for line in head[:end].decode("ascii", errors="replace").splitlines():
+        words = line.split()
+        if words[:1] == ["format"]:
+            binary = len(words) > 1 and words[1].startswith("binary")
+        elif words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+            element = (words[1], int(words[2]))
+            if element[1] > limits().max_splats:
+                raise over(path, words[1], "element count", element[1], "max_splats")
+        elif words[:1] == ["property"] and element is not None:
+            if words[1:2] == ["list"]:
+                name = words[-1] if len(words) > 4 else "?"
+                raise FormatError(path, f"{element[0]}.{name}", "list properties are not part of a Gaussian PLY")
+            needed += element[1] * PLY_TYPES.get(words[1] if len(words) > 1 else "", 0)
+            if short is None and needed > body:
+                short = element[0]  # the first element whose data cannot be in the file
+    if binary and short is not None:
+        raise FormatError(
+            path, short, f"truncated: the header declares {needed:,} bytes of data, the file holds {max(body, 0):,}"
+        )
+
+
 def _open(path: Path):
     from plyfile import PlyData, PlyElementParseError, PlyHeaderParseError
 
     if not path.is_file():
         raise FormatError(path, "", "file is missing")
+    _check_header(path)
     try:
         return PlyData.read(str(path))  # memory-mapped: the header is parsed and the body size checked
     except PlyElementParseError as exc:

@@ -3,20 +3,18 @@
 Both speak one protocol, :class:`LLMClient` (``provider``, ``model``, ``request(prompt, schema)``
 returning the raw reply text). :func:`structured_call` adds what every provider needs: a disk cache
 keyed by (provider, model, prompt sha256, schema version) so re-runs make no calls, bounded retries
-with exponential back-off and jitter on 408/429/5xx and time-outs, one repair attempt when a reply is
-not valid JSON for the schema, and a process-wide concurrency limit. API keys never reach a file, a
-log line or an error message: messages are scrubbed of every key value in the environment.
+with exponential back-off and jitter on 408/429/5xx, time-outs and dropped connections (a 429's
+suggested delay honoured), one repair attempt when a reply is not valid JSON for the schema, and a
+process-wide concurrency limit. API keys never reach a file, a log line or an error message: replies
+(before they are parsed or cached) and messages are scrubbed of every key value in the environment.
 """
 
 from __future__ import annotations
 
-import json
 import os
 import random
 import threading
 import time
-import urllib.error
-import urllib.request
 from pathlib import Path
 from typing import Protocol, TypeVar
 
@@ -28,6 +26,7 @@ from song.util import sha256_bytes, sha256_json, write_text_atomic
 
 KEY_VARIABLES = ("GOOGLE_API_KEY", "GEMINI_API_KEY", "OPENAI_API_KEY")
 RETRY_STATUS = {408, 429, 500, 502, 503, 504}
+MAX_RETRY_AFTER_S = 60.0  # a server's suggested retry delay is honoured up to this
 T = TypeVar("T", bound=BaseModel)
 _SLOTS: dict[int, threading.BoundedSemaphore] = {}
 
@@ -37,7 +36,15 @@ class LLMError(SongError):
 
 
 class TransientLLMError(LLMError):
-    """A failure worth retrying: 408/429/5xx or a time-out."""
+    """A failure worth retrying: 408/429/5xx, a time-out, a refused or dropped connection.
+
+    ``retry_after_s`` is the server's suggested delay (a 429's ``Retry-After`` or Gemini's
+    ``RetryInfo``), when it gave one.
+    """
+
+    def __init__(self, message: str, retry_after_s: float | None = None) -> None:
+        super().__init__(message)
+        self.retry_after_s = retry_after_s
 
 
 def scrub(text: str) -> str:
@@ -47,6 +54,14 @@ def scrub(text: str) -> str:
         if value:
             text = text.replace(value, "***")
     return text
+
+
+def _seconds(value: object) -> float | None:
+    """``"1.5"``, ``"20s"`` or a number → seconds; None when absent or unreadable."""
+    try:
+        return max(0.0, float(str(value).strip().removesuffix("s")))
+    except (TypeError, ValueError):
+        return None
 
 
 class LLMClient(Protocol):
@@ -60,11 +75,21 @@ class LLMClient(Protocol):
         ...
 
 
+def _gemini_retry_delay(details: object) -> float | None:
+    for item in details if isinstance(details, list) else []:
+        if isinstance(item, dict) and str(item.get("@type", "")).endswith("google.rpc.RetryInfo"):
+            return _seconds(item.get("retryDelay"))
+    return None
+
+
 class GeminiClient:
     """Gemini through the official ``google-genai`` SDK with structured JSON output.
 
-    The key comes from ``GOOGLE_API_KEY`` / ``GEMINI_API_KEY`` with the SDK's own precedence (the SDK
-    reads them; SONG never handles the value). ``base_url`` points the SDK elsewhere (tests).
+    The JSON schema goes in ``response_json_schema`` (sent as ``responseJsonSchema``, full JSON Schema):
+    passing the pydantic model as ``response_schema`` makes the SDK send ``additional_properties``
+    inside the OpenAPI-subset ``responseSchema``, which the Gemini API rejects with 400 (python-genai
+    issue 1815). The key comes from ``GOOGLE_API_KEY`` / ``GEMINI_API_KEY`` with the SDK's own
+    precedence (SONG never handles the value). ``base_url`` points the SDK elsewhere (tests).
     """
 
     provider = "gemini"
@@ -77,11 +102,7 @@ class GeminiClient:
             raise MissingDependencyError("google-genai", "gemini") from exc
         self.model = model
         self._types = types
-        options = (
-            types.HttpOptions(timeout=int(timeout_s * 1000), base_url=base_url)
-            if base_url
-            else types.HttpOptions(timeout=int(timeout_s * 1000))
-        )
+        options = types.HttpOptions(timeout=int(timeout_s * 1000), **({"base_url": base_url} if base_url else {}))
         try:
             self._client = genai.Client(http_options=options)
         except Exception as exc:  # no key, bad options
@@ -91,58 +112,81 @@ class GeminiClient:
         """One structured Gemini call; returns the reply text (errors raise :class:`LLMError`)."""
         from google.genai import errors
 
-        config = self._types.GenerateContentConfig(response_mime_type="application/json", response_schema=schema)
+        config = self._types.GenerateContentConfig(
+            response_mime_type="application/json", response_json_schema=schema.model_json_schema()
+        )
         try:
             response = self._client.models.generate_content(model=self.model, contents=prompt, config=config)
         except errors.APIError as exc:
-            kind = TransientLLMError if exc.code in RETRY_STATUS else LLMError
-            raise kind(scrub(f"gemini HTTP {exc.code}: {exc.message}")) from None
-        except Exception as exc:  # httpx time-outs and connection errors
-            if "timeout" in type(exc).__name__.lower() or "timed out" in str(exc).lower():
-                raise TransientLLMError(scrub(f"gemini time-out: {exc}")) from None
-            raise LLMError(scrub(f"gemini request failed: {type(exc).__name__}: {exc}")) from None
+            if exc.code in RETRY_STATUS:
+                delay = _gemini_retry_delay((exc.details or {}).get("error", {}).get("details"))
+                raise TransientLLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}"), delay) from None
+            raise LLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}")) from None
+        except Exception as exc:  # time-outs, refused or dropped connections (httpx errors): all transient
+            raise TransientLLMError(scrub(f"gemini request failed: {type(exc).__name__}: {exc}")) from None
         return response.text or ""
 
 
 class OpenAICompatibleClient:
-    """Any server speaking the OpenAI chat-completions API with JSON-schema output (vLLM, Ollama, llama.cpp)."""
+    """Any server speaking the OpenAI chat-completions API (vLLM, Ollama, llama.cpp), through the ``openai`` SDK.
+
+    JSON-schema output (``response_format``), the SDK's own retries off (:func:`structured_call`
+    retries), and redirects not followed: the ``Authorization`` header never goes to another origin.
+    ``OPENAI_API_KEY`` is sent when set (local servers usually ignore it).
+    """
 
     provider = "openai"
 
     def __init__(self, base_url: str, model: str, timeout_s: float) -> None:
+        try:
+            import openai
+        except ImportError as exc:
+            raise MissingDependencyError("openai", "openai") from exc
+        self._openai = openai
         self.base_url = base_url.rstrip("/")
         self.model = model
-        self.timeout_s = timeout_s
+        self._client = openai.OpenAI(
+            base_url=self.base_url,
+            api_key=os.environ.get("OPENAI_API_KEY") or "no-key",  # the SDK insists on one; servers may not
+            timeout=timeout_s,
+            max_retries=0,
+            http_client=openai.DefaultHttpxClient(follow_redirects=False),
+        )
 
     def request(self, prompt: str, schema: type[BaseModel]) -> str:
-        """One chat-completions call in JSON mode; returns the reply text (errors raise :class:`LLMError`)."""
-        body = {
-            "model": self.model,
-            "messages": [{"role": "user", "content": prompt}],
-            "response_format": {
-                "type": "json_schema",
-                "json_schema": {"name": schema.__name__, "schema": schema.model_json_schema(), "strict": True},
-            },
+        """One chat-completions call with JSON-schema output; returns the reply text (errors: :class:`LLMError`)."""
+        openai = self._openai
+        response_format = {
+            "type": "json_schema",
+            "json_schema": {"name": schema.__name__, "schema": schema.model_json_schema(), "strict": True},
         }
-        headers = {"Content-Type": "application/json"}
-        if os.environ.get("OPENAI_API_KEY"):
-            headers["Authorization"] = f"Bearer {os.environ['OPENAI_API_KEY']}"
-        req = urllib.request.Request(f"{self.base_url}/chat/completions", json.dumps(body).encode(), headers)
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout_s) as reply:
-                data = json.loads(reply.read())
-        except urllib.error.HTTPError as exc:
-            kind = TransientLLMError if exc.code in RETRY_STATUS else LLMError
-            raise kind(scrub(f"openai-compatible HTTP {exc.code}")) from None
-        except (TimeoutError, urllib.error.URLError) as exc:
-            if isinstance(exc, TimeoutError) or "timed out" in str(exc):
-                raise TransientLLMError(scrub(f"openai-compatible time-out: {exc}")) from None
-            raise LLMError(scrub(f"openai-compatible request failed: {exc}")) from None
-        except ValueError as exc:
-            raise LLMError(f"openai-compatible reply is not JSON: {exc}") from None
+            reply = self._client.chat.completions.create(
+                model=self.model, messages=[{"role": "user", "content": prompt}], response_format=response_format
+            )
+        except openai.APIStatusError as exc:
+            code = exc.status_code
+            if 300 <= code < 400:
+                target = exc.response.headers.get("location", "?")
+                raise LLMError(
+                    scrub(
+                        f"openai-compatible server at {self.base_url} redirected to {target}; redirects are not followed"
+                    )
+                ) from None
+            if code in RETRY_STATUS:
+                headers = exc.response.headers
+                delay = _seconds(headers.get("retry-after"))
+                raise TransientLLMError(scrub(f"openai-compatible HTTP {code}"), delay) from None
+            raise LLMError(scrub(f"openai-compatible HTTP {code}")) from None
+        except openai.APITimeoutError:
+            raise TransientLLMError(f"openai-compatible time-out after {self._client.timeout} s") from None
+        except openai.APIConnectionError as exc:  # refused, reset or closed connections
+            raise TransientLLMError(scrub(f"openai-compatible connection failed: {exc.__cause__ or exc}")) from None
+        except openai.OpenAIError as exc:
+            raise LLMError(scrub(f"openai-compatible request failed: {type(exc).__name__}: {exc}")) from None
         try:
-            return data["choices"][0]["message"]["content"]
-        except (KeyError, IndexError, TypeError) as exc:
+            return reply.choices[0].message.content or ""
+        except (AttributeError, IndexError, TypeError) as exc:
             raise LLMError(f"openai-compatible reply has no message content: {exc}") from None
 
 
@@ -180,7 +224,7 @@ def structured_call(
         except ValidationError:
             pass  # a stale or damaged cache entry: ask again
     rng = rng or random.Random(0)
-    text = _with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrency, rng)
+    text = scrub(_with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrency, rng))
     try:
         result = _parse(text, schema)
     except ValidationError as exc:
@@ -188,7 +232,7 @@ def structured_call(
             f"{prompt}\n\nYour previous reply was not valid JSON for the required schema "
             f"({exc.error_count()} problems, first: {exc.errors()[0]['msg']}). Reply again with only valid JSON."
         )
-        text = _with_retries(client, repair, schema, max_retries, backoff_s, max_concurrency, rng)
+        text = scrub(_with_retries(client, repair, schema, max_retries, backoff_s, max_concurrency, rng))
         try:
             result = _parse(text, schema)
         except ValidationError as again:
@@ -205,7 +249,10 @@ def _with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrenc
         try:
             with _slot(max_concurrency):
                 return client.request(prompt, schema)
-        except TransientLLMError:
-            time.sleep(backoff_s * (2**attempt) * (0.5 + rng.random()))  # exponential back-off with jitter
+        except TransientLLMError as exc:
+            delay = backoff_s * (2**attempt) * (0.5 + rng.random())  # exponential back-off with jitter
+            if exc.retry_after_s is not None:  # the server said when to come back
+                delay = max(delay, min(exc.retry_after_s, MAX_RETRY_AFTER_S))
+            time.sleep(delay)
     with _slot(max_concurrency):
         return client.request(prompt, schema)  # the last try: its error goes to the caller

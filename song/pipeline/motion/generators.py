@@ -70,7 +70,7 @@ def make_generator(cfg: MotionConfig) -> tuple[MotionGenerator, str]:
         return ProceduralGait(cfg), ""
     from song.pipeline.motion.kimodo import KimodoGenerator, kimodo_availability
 
-    reason = kimodo_availability(cfg.kimodo_model)
+    reason = kimodo_availability(cfg)
     if not reason:
         return KimodoGenerator(cfg), ""
     if cfg.generator == "kimodo":

@@ -3,20 +3,30 @@
 Used when ``kimodo`` imports and the model's weights are already on disk (``CHECKPOINT_DIR/<model>``
 or the Hugging Face cache with ``LOCAL_CACHE=true``); nothing is ever downloaded here.
 
-- **Model**: ``kimodo.load_model(name, device=...)``. Kimodo encodes prompts with LLM2Vec (Llama-3
-  8B); we register a *text-encoder stand-in* (:class:`CachedTextEncoder`, a preset of
+- **Model**: ``kimodo.load_model(name, device=...)`` (partial names such as ``SOMA`` are resolved by
+  Kimodo's registry). Kimodo encodes each prompt with LLM2Vec (Llama-3 8B) into one pooled (1, 4096)
+  vector; we register a *text-encoder stand-in* (:class:`CachedTextEncoder`, a preset of
   ``kimodo.model.load_model.TEXT_ENCODER_PRESETS`` selected with ``TEXT_ENCODER_MODE=local``) that
-  serves cached prompt embeddings from disk, so the 8B encoder is needed once per prompt, offline,
-  via :func:`store_prompt_embedding`.
+  serves those vectors from disk, so the 8B encoder is needed once per prompt, offline, via
+  :func:`store_prompt_embedding`. Prompts are keyed after :func:`sanitize_prompt`, which does exactly
+  what Kimodo's ``sanitize_texts`` does (Kimodo sanitises before encoding).
+- **No network**: ``HF_HUB_OFFLINE=1`` is set before anything imports ``huggingface_hub`` (which reads
+  it only at import; if it was imported earlier its constant is set too), so a missing file raises
+  instead of downloading.
 - **Canonical frame** (Kimodo's): Y up, the body faces +Z at heading 0 and heading
   ``θ = atan2(dx, dz)``. Each track is translated so frame 0 is at the origin and rotated so its first
   heading is +Z; world ``(x, y, z)`` then maps to Kimodo ``(X, Y, Z) = (y', z, x')`` (``x'`` along the
   first heading). The root path is a dense ``Root2DConstraintSet`` (``smooth_root_2d`` = (X, Z) every
   frame, ``global_root_heading`` = (cos θ, sin θ)) with ``first_heading_angle = 0``; the output is
   mapped back by the inverse transform.
-- **Batching**: tracks up to ``kimodo_max_frames`` are generated together, one sample each with its
-  own constraint list; longer tracks use multi-prompt generation (the prompt repeated over near-equal
-  segments ≤ the limit, stitched by Kimodo's transitions).
+- **Batching**: tracks up to ``kimodo_max_frames`` (Kimodo's 10 s = 300 frames) are generated
+  together, one sample each with its own constraint list; longer tracks use multi-prompt generation
+  (the prompt repeated over near-equal segments, stitched by Kimodo's transitions). Kimodo generates
+  every segment after the first with 5 + 10 % of the previous segment's frames of transition in
+  front, so segments are planned so that each generated window stays within the limit
+  (:func:`plan_segments`). Constraint frame indices are CPU tensors, as Kimodo's own CLI builds them
+  (its post-processing indexes CPU tensors with them), and the denoising steps are capped at the
+  model's base step count (more would index past its schedule).
 - **Retargeting**: SOMA's neutral pose is a T-pose facing +Z like ours facing +x, and Kimodo's global
   rotations are relative to it, so each of our 24 joints copies the global rotation of its mapped SOMA
   joint (conjugated into our frame); the pelvis height is scaled by the ratio of rest pelvis heights.
@@ -91,38 +101,99 @@ def _embedding_path(cache_dir: Path, text: str) -> Path:
     return cache_dir / f"{hashlib.sha256(text.encode('utf-8')).hexdigest()}.npy"
 
 
+FINAL_PUNCTUATION = ".!?\"])'"
+TRANSITION_FRAMES, TRANSITION_SHARE = 5, 0.10  # Kimodo's multi-prompt transition (5 + 10 % of the previous)
+LLM_DIM = 4096  # LLM2Vec's pooled prompt vector
+
+
+def sanitize_prompt(text: str) -> str:
+    """A prompt as Kimodo's ``sanitize_text`` leaves it (our own implementation of its rules).
+
+    Whitespace collapsed; leading non-alphanumerics dropped; ``str.capitalize`` (first letter upper,
+    the rest lower); trailing characters that are neither alphanumeric nor closing punctuation
+    dropped; a period added unless it ends in ``.!?``; then every sentence (split at ``.``, ``!``,
+    ``?`` in turn) stripped, its first character capitalised, and re-joined with the break and a space.
+    """
+    text = " ".join(text.split())
+    if not text:
+        return text
+    start = next((i for i, c in enumerate(text) if c.isalnum()), len(text) - 1)
+    text = text[start:].capitalize()
+    end = next((i for i in range(len(text) - 1, -1, -1) if text[i].isalnum() or text[i] in FINAL_PUNCTUATION), 0)
+    text = text[: end + 1]
+    if text[-1] not in ".!?":
+        text += "."
+    for mark in ".!?":
+        parts = [part.strip() for part in text.split(mark)]
+        text = f"{mark} ".join(part[0].upper() + part[1:] if part else part for part in parts).strip()
+    return text
+
+
 def _sanitize(texts: list[str]) -> list[str]:
-    try:
-        from kimodo.sanitize import sanitize_texts
-    except ImportError:
-        return [" ".join(text.split()) for text in texts]
-    return list(sanitize_texts(texts))
+    return [sanitize_prompt(text) for text in texts]
+
+
+def plan_segments(n_frames: int, max_frames: int) -> list[int]:
+    """Near-equal segment lengths summing to ``n_frames`` whose generated windows stay ≤ ``max_frames``.
+
+    The first window is its segment; every later one is its segment plus Kimodo's transition
+    (5 + ⌊10 % of the previous segment⌋ frames).
+    """
+    largest = max(1, int((max_frames - TRANSITION_FRAMES) / (1.0 + TRANSITION_SHARE)))
+    count = 1 if n_frames <= max_frames else math.ceil(n_frames / largest)
+    base = n_frames // count
+    return [base + (1 if i < n_frames % count else 0) for i in range(count)]
+
+
+def _offline() -> None:
+    """``HF_HUB_OFFLINE=1`` for this process, before (or, if too late, also after) huggingface_hub's import."""
+    import sys
+
+    os.environ["HF_HUB_OFFLINE"] = "1"
+    constants = sys.modules.get("huggingface_hub.constants")
+    if constants is not None:
+        constants.HF_HUB_OFFLINE = True
+
+
+def _kimodo(name: str) -> Any:
+    """Import a kimodo module with the hub offline."""
+    _offline()
+    return importlib.import_module(name)
 
 
 def store_prompt_embedding(cache_dir: str | Path, prompt: str, embedding: np.ndarray) -> Path:
-    """Cache one prompt's token embeddings ``(L, D)`` (e.g. from Kimodo's LLM2VecEncoder) for the stand-in.
+    """Cache one prompt's pooled LLM2Vec vector (4096,) or (1, 4096) for the stand-in encoder.
 
-    The key is the prompt as Kimodo passes it to its encoder (after ``sanitize_texts``).
+    Get it once, where the 8B encoder runs, from ``kimodo.model.LLM2VecEncoder()(prompt)``. The key is
+    the prompt as Kimodo encodes it (after :func:`sanitize_prompt`).
     """
+    import io
+
     from song.util import write_bytes_atomic
 
     embedding = np.asarray(embedding, dtype=np.float32)
-    if embedding.ndim != 2:
-        raise ValueError(f"embedding must be (tokens, dim), got {embedding.shape}")
-    path = _embedding_path(Path(cache_dir), _sanitize([prompt])[0])
+    if embedding.ndim == 2 and embedding.shape[0] == 1:
+        embedding = embedding[0]
+    if embedding.shape != (LLM_DIM,):
+        raise ValueError(f"embedding must be one pooled ({LLM_DIM},) vector per prompt, got {embedding.shape}")
+    path = _embedding_path(Path(cache_dir), sanitize_prompt(prompt))
     path.parent.mkdir(parents=True, exist_ok=True)
-    import io
-
     buffer = io.BytesIO()
     np.save(buffer, embedding)
     write_bytes_atomic(path, buffer.getvalue())
     return path
 
 
-class CachedTextEncoder:
-    """Text-encoder stand-in with Kimodo's encoder call signature: ``(texts) -> (feat, lengths)``.
+def has_prompt_embedding(cache_dir: str | Path, prompt: str) -> bool:
+    """Whether :func:`store_prompt_embedding` cached ``prompt``."""
+    return _embedding_path(Path(cache_dir), sanitize_prompt(prompt)).is_file()
 
-    ``feat`` is a ``(B, L_max, D)`` float tensor zero-padded per prompt, ``lengths`` the token counts.
+
+class CachedTextEncoder:
+    """Text-encoder stand-in with Kimodo's encoder call: ``(texts) -> (feat (B, 1, 4096), lengths [1] * B)``.
+
+    LLM2Vec pools each prompt into one vector, so every "sequence" has length 1 (a single string gives
+    ``(1, 4096)`` and ``1``, as Kimodo's encoder does).
 
     Args:
         cache_dir: folder written by :func:`store_prompt_embedding`.
@@ -147,32 +218,35 @@ class CachedTextEncoder:
             path = _embedding_path(self.cache_dir, text)
             if not path.exists():
                 raise MissingEmbeddingError(
-                    f"{path}: no cached Kimodo embedding for prompt {text!r}; "
-                    "encode it once with Kimodo's LLM2VecEncoder and song.pipeline.motion.kimodo.store_prompt_embedding"
+                    f"{path}: no cached Kimodo embedding for prompt {text!r}; encode it once with Kimodo's "
+                    "LLM2VecEncoder and song.pipeline.motion.kimodo.store_prompt_embedding"
                 )
-            self._memory[text] = np.load(path)
+            self._memory[text] = np.load(path).reshape(-1)
         return self._memory[text]
 
-    def __call__(self, texts: str | list[str]) -> tuple[Any, list[int]]:
-        """Encode prompts from the cache: (embeddings, lengths), as Kimodo's text encoder returns."""
+    def __call__(self, texts: str | list[str]) -> tuple[Any, Any]:
+        """Encode prompts from the cache, as Kimodo's text encoder returns them."""
         import torch
 
-        texts = _sanitize([texts] if isinstance(texts, str) else list(texts))  # idempotent
-        arrays = [self._load(text) for text in texts]
-        lengths = [len(a) for a in arrays]
-        feat = np.zeros((len(arrays), max(lengths), arrays[0].shape[1]), dtype=np.float32)
-        for i, a in enumerate(arrays):
-            feat[i, : len(a)] = a
+        single = isinstance(texts, str)
+        names = _sanitize([texts] if single else list(texts))  # idempotent: Kimodo sanitised already
+        feat = np.stack([self._load(text) for text in names])[:, None, :]
         out = torch.from_numpy(feat).to(device=self.device)
-        return (out if self.dtype is None else out.to(self.dtype)), lengths
+        out = out if self.dtype is None else out.to(self.dtype)
+        return (out[0], 1) if single else (out, [1] * len(names))
 
 
 def _model_info(model_name: str) -> tuple[str, str, str]:
-    """(short key, display name, Hugging Face repo id) of a Kimodo model name."""
-    registry = importlib.import_module("kimodo.model.registry")
+    """(short key, display name, Hugging Face repo id) of a Kimodo model name, partial names resolved."""
+    registry = _kimodo("kimodo.model.registry")
     short = model_name
     if short not in registry.MODEL_NAMES:
-        short = registry.get_short_key_from_display_name(model_name) or model_name
+        short = registry.get_short_key_from_display_name(model_name) or short
+    if short not in registry.MODEL_NAMES and hasattr(registry, "resolve_model_name"):
+        try:
+            short = registry.resolve_model_name(model_name, "Kimodo")
+        except ValueError:
+            pass
     info = registry.get_model_info(short)
     if info is None:
         return short, model_name, ""
@@ -187,8 +261,9 @@ def kimodo_checkpoint(model_name: str) -> Path | None:
         for name in (display, short):
             if (Path(root) / name / "config.yaml").exists():
                 return Path(root) / name
-    if os.environ.get("LOCAL_CACHE", "false").lower() == "true" and repo_id:
+    if repo_id:
         try:
+            _offline()
             from huggingface_hub import try_to_load_from_cache
         except ImportError:
             return None
@@ -198,15 +273,25 @@ def kimodo_checkpoint(model_name: str) -> Path | None:
     return None
 
 
-def kimodo_availability(model_name: str) -> str:
-    """``""`` when Kimodo can run here, else the reason it cannot (recorded as the fallback reason)."""
+def kimodo_availability(cfg: MotionConfig) -> str:
+    """``""`` when Kimodo can run here with ``cfg``, else the reason it cannot (the fallback reason).
+
+    Checks the package, the weights on disk, Kimodo's ``motion_correction`` extension when its
+    post-processing is on, and the cached embedding of the prompt.
+    """
     if importlib.util.find_spec("kimodo") is None:
         return "the kimodo package is not installed"
     try:
-        if kimodo_checkpoint(model_name) is None:
-            return f"no local weights for {model_name} (set CHECKPOINT_DIR, or LOCAL_CACHE=true with a HF cache)"
+        if kimodo_checkpoint(cfg.kimodo_model) is None:
+            return (
+                f"no local weights for {cfg.kimodo_model} (set CHECKPOINT_DIR, or have them in the Hugging Face cache)"
+            )
     except Exception as exc:  # a broken kimodo install must not break the stage
         return f"kimodo import failed: {type(exc).__name__}: {exc}"
+    if cfg.kimodo_postprocess and importlib.util.find_spec("motion_correction") is None:
+        return "Kimodo's motion_correction extension is not built (pip install -e MotionCorrection), or set motion.kimodo_postprocess=false"
+    if not has_prompt_embedding(embedding_cache_dir(cfg), cfg.prompt):
+        return f"no cached embedding of the prompt {sanitize_prompt(cfg.prompt)!r} in {embedding_cache_dir(cfg)}"
     return ""
 
 
@@ -243,12 +328,6 @@ def canonicalize(traj: Trajectory, t: np.ndarray) -> dict[str, np.ndarray]:
     return {"root_2d": np.stack([left, fwd], axis=-1), "heading": heading, "origin": origin, "yaw0": np.array(yaw0)}
 
 
-def _segments(n_frames: int, max_frames: int) -> list[int]:
-    count = max(1, math.ceil(n_frames / max_frames))
-    base = n_frames // count
-    return [base + (1 if i < n_frames % count else 0) for i in range(count)]
-
-
 def _quiet(iterable: Any) -> Any:
     return iterable
 
@@ -272,14 +351,14 @@ class KimodoGenerator:
             import torch
         except ImportError:
             raise MissingDependencyError("torch", "kimodo") from None
-        kimodo = importlib.import_module("kimodo")
-        loader = importlib.import_module("kimodo.model.load_model")
+        kimodo = _kimodo("kimodo")
+        loader = _kimodo("kimodo.model.load_model")
         checkpoint = kimodo_checkpoint(self.cfg.kimodo_model)
         loader.TEXT_ENCODER_PRESETS[ENCODER_PRESET] = {
             "target": f"{CachedTextEncoder.__module__}.{CachedTextEncoder.__name__}",
             "kwargs": {"cache_dir": str(embedding_cache_dir(self.cfg))},
         }
-        env = {"TEXT_ENCODER_MODE": "local", "TEXT_ENCODER": ENCODER_PRESET, "HF_HUB_OFFLINE": "1"}
+        env = {"TEXT_ENCODER_MODE": "local", "TEXT_ENCODER": ENCODER_PRESET}
         if checkpoint is not None and not os.environ.get("CHECKPOINT_DIR"):
             env["LOCAL_CACHE"] = "true"
         device = self.device or ("cuda:0" if torch.cuda.is_available() else "cpu")
@@ -293,15 +372,14 @@ class KimodoGenerator:
     def _constraint(self, model: Any, canon: dict[str, np.ndarray]) -> Any:
         import torch
 
-        constraints = importlib.import_module("kimodo.constraints")
+        constraints = _kimodo("kimodo.constraints")
         n = len(canon["root_2d"])
-        device = getattr(model, "device", None) or "cpu"
         heading = np.stack([np.cos(canon["heading"]), np.sin(canon["heading"])], axis=-1)
-        return constraints.Root2DConstraintSet(
+        return constraints.Root2DConstraintSet(  # on the CPU, as Kimodo's CLI builds them
             model.skeleton,
-            torch.arange(n, device=device),
-            torch.as_tensor(canon["root_2d"], dtype=torch.float32, device=device),
-            global_root_heading=torch.as_tensor(heading, dtype=torch.float32, device=device),
+            torch.arange(n),
+            torch.as_tensor(canon["root_2d"], dtype=torch.float32),
+            global_root_heading=torch.as_tensor(heading, dtype=torch.float32),
         )
 
     def generate(
@@ -321,8 +399,10 @@ class KimodoGenerator:
         motions: list[Motion | None] = [None] * len(jobs)
         short = [i for i, job in enumerate(jobs) if len(job[3]) <= self.cfg.kimodo_max_frames]
         long = [i for i, job in enumerate(jobs) if len(job[3]) > self.cfg.kimodo_max_frames]
+        base_steps = getattr(getattr(model, "diffusion", None), "num_base_steps", None)
+        self._steps = min(self.cfg.kimodo_steps, int(base_steps)) if base_steps else self.cfg.kimodo_steps
         common = {
-            "num_denoising_steps": self.cfg.kimodo_steps,
+            "num_denoising_steps": self._steps,
             "post_processing": self.cfg.kimodo_postprocess,
             "return_numpy": True,
             "progress_bar": _quiet,
@@ -344,7 +424,7 @@ class KimodoGenerator:
         for i in long:
             seed = jobs[i][2]
             torch.manual_seed(seed % (2**63))
-            lengths = _segments(len(jobs[i][3]), self.cfg.kimodo_max_frames)
+            lengths = plan_segments(len(jobs[i][3]), self.cfg.kimodo_max_frames)
             output = model(
                 [prompt] * len(lengths),
                 lengths,
@@ -396,7 +476,7 @@ class KimodoGenerator:
                 "segments": int(segments),
                 "prompt": self.cfg.prompt,
                 "activity": activity,
-                "denoising_steps": self.cfg.kimodo_steps,
+                "denoising_steps": self._steps,
                 "kimodo_postprocess": self.cfg.kimodo_postprocess,
                 "canonical": {"origin": canon["origin"].round(6).tolist(), "yaw0": round(float(canon["yaw0"]), 6)},
                 "walk_ratio_m_s": round(style.walk_ratio, 6),

@@ -15,7 +15,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from song.config import SongConfig
+from song.datasets.scenes import load_scene_package
 from song.pipeline.chain import iter_run
+from song.util import sha256_file, write_json_atomic
 from tests.conftest import build_two_room_scene
 
 DIFFICULTY = ["hard", "medium", "medium", "easy", "easy"]
@@ -49,6 +51,11 @@ def build_graded_run(root: Path, n_scenes: int = 2, episodes_per_scene: int = 5,
     rows = []
     for k in range(n_scenes):
         _crowd(run / "scenes" / f"scene_{k}" / "crowd.parquet", 2 + k)
+        # what a completed crowd stage records: its outputs and the scene files it read
+        files = load_scene_package(scenes / f"scene_{k}").content_hash()
+        outputs = {"crowd.parquet": sha256_file(run / "scenes" / f"scene_{k}" / "crowd.parquet")}
+        record = {"crowd": {"status": "ok", "input_hash": "synthetic", "outputs": outputs, "scene": files}}
+        write_json_atomic(run / "scenes" / f"scene_{k}" / "stages.json", record)
         for e in range(episodes_per_scene):
             length = 3.0 + e + shift
             rows.append(

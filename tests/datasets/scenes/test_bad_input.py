@@ -144,7 +144,7 @@ CATALOGUE: list[tuple[str, Callable[[Path], None], str, str]] = [
         "truncated ply",
         lambda r: (r / PLY).write_bytes(splat_file().read_bytes()[:700_000]),
         f"{PLY}: vertex",
-        "end-of-file",
+        "truncated",
     ),
     ("garbage ply", _write(PLY, b"PK\x03\x04 a zip, not a ply"), f"{PLY}: header", "not a readable PLY"),
     ("ply without splats", _write(PLY, EMPTY_PLY), f"{PLY}: vertex", "no splats"),

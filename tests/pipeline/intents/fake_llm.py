@@ -1,5 +1,15 @@
-"""Local stand-ins for the LLM services, on 127.0.0.1: Gemini's REST ``generateContent`` and an
-OpenAI-compatible ``/chat/completions``. Each request pops the next scripted reply."""
+"""Local stand-ins for the LLM services on 127.0.0.1 that behave like the real ones where it matters.
+
+- Gemini ``generateContent`` (v1beta REST, what google-genai sends): like the real API it rejects a
+  ``responseSchema`` holding a field the OpenAPI-subset schema does not know (the SDK turns pydantic's
+  ``extra="forbid"`` into ``additional_properties``, and the real API answers 400 "Unknown name"),
+  accepts ``responseJsonSchema`` (full JSON Schema), and sends 429s with a ``RetryInfo`` delay.
+- OpenAI-compatible ``/chat/completions``: 429s with ``Retry-After``, redirects, and a server that
+  closes the socket after reading the request.
+
+A script is a list of steps ``(status, text, delay_s)``; ``status`` is an HTTP code, ``"close"`` (drop
+the connection) or ``"redirect"`` (302 to the URL in ``text``). ``requests`` records what arrived.
+"""
 
 from __future__ import annotations
 
@@ -8,22 +18,60 @@ import threading
 import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
+# the fields of Gemini's Schema object (the OpenAPI 3.0 subset that responseSchema accepts)
+GEMINI_SCHEMA_FIELDS = {
+    "type", "format", "title", "description", "nullable", "enum", "maxItems", "minItems", "properties",
+    "required", "minProperties", "maxProperties", "minLength", "maxLength", "pattern", "example", "anyOf",
+    "propertyOrdering", "default", "items", "minimum", "maximum",
+}  # fmt: skip
+RETRY_DELAY_S = 0.2
+
+
+def unknown_schema_fields(schema: object, where: str = "response_schema") -> list[str]:
+    """Paths of fields Gemini's ``Schema`` does not define (the real API rejects the request)."""
+    found = []
+    if isinstance(schema, dict):
+        for key, value in schema.items():
+            if key not in GEMINI_SCHEMA_FIELDS:
+                found.append(f"{where}.{key}")
+            elif key == "properties" and isinstance(value, dict):
+                for name, sub in value.items():
+                    found += unknown_schema_fields(sub, f"{where}.properties[{name}]")
+            elif key == "items" or key == "anyOf":
+                for sub in value if isinstance(value, list) else [value]:
+                    found += unknown_schema_fields(sub, f"{where}.{key}")
+    return found
+
 
 class FakeServer:
-    """Scripted replies: a list of (status, text, delay_s); ``requests`` records what arrived."""
+    """Scripted replies (see the module docstring)."""
 
-    def __init__(self, kind: str, script: list[tuple[int, str, float]]) -> None:
+    def __init__(self, kind: str, script: list[tuple[int | str, str, float]]) -> None:
         self.kind, self.script, self.requests = kind, list(script), []
         outer = self
 
         class Handler(BaseHTTPRequestHandler):
             def do_POST(self) -> None:  # noqa: N802 - http.server API
                 length = int(self.headers.get("Content-Length", 0))
-                outer.requests.append(
-                    {"path": self.path, "headers": dict(self.headers), "body": json.loads(self.rfile.read(length))}
-                )
+                body = json.loads(self.rfile.read(length))
+                outer.requests.append({"path": self.path, "headers": dict(self.headers), "body": body})
                 status, text, delay = outer.script.pop(0) if outer.script else (500, "", 0.0)
                 time.sleep(delay)
+                if status == "close":  # the server goes away mid-request
+                    self.close_connection = True
+                    self.connection.shutdown(2)
+                    return
+                if status == "redirect":
+                    self._send(302, b"", {"Location": text})
+                    return
+                if outer.kind == "gemini" and status == 200:
+                    bad = unknown_schema_fields(body.get("generationConfig", {}).get("responseSchema", {}))
+                    if bad:
+                        status, text = 400, f'Invalid JSON payload received. Unknown name "{bad[0].split(".")[-1]}"'
+                self._reply(status, text)
+
+            def _reply(self, status: int, text: str) -> None:
+                headers = {}
                 if status == 200:
                     if outer.kind == "gemini":
                         payload = {
@@ -34,11 +82,23 @@ class FakeServer:
                     else:
                         payload = {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
                 else:
-                    payload = {"error": {"code": status, "message": "scripted failure", "status": "UNAVAILABLE"}}
-                data = json.dumps(payload).encode()
+                    error = {"code": status, "message": text or "scripted failure", "status": "UNAVAILABLE"}
+                    if status == 429:
+                        error["status"] = "RESOURCE_EXHAUSTED"
+                        error["details"] = [
+                            {"@type": "type.googleapis.com/google.rpc.RetryInfo", "retryDelay": f"{RETRY_DELAY_S}s"}
+                        ]
+                        headers["Retry-After"] = str(RETRY_DELAY_S)
+                    if status == 400:
+                        error["status"] = "INVALID_ARGUMENT"
+                    payload = {"error": error}
+                self._send(status, json.dumps(payload).encode(), {"Content-Type": "application/json", **headers})
+
+            def _send(self, status: int, data: bytes, headers: dict[str, str]) -> None:
                 try:
                     self.send_response(status)
-                    self.send_header("Content-Type", "application/json")
+                    for name, value in headers.items():
+                        self.send_header(name, value)
                     self.send_header("Content-Length", str(len(data)))
                     self.end_headers()
                     self.wfile.write(data)

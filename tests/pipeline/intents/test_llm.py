@@ -114,3 +114,52 @@ def test_slow_reply_times_out_then_falls_back(make_scene, tmp_path, monkeypatch,
     result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(200, DESC, 3.0)] * 3, max_retries=1, timeout_s=0.5)
     assert result.provenance.fallback and result.intents
     assert "time" in result.llm_error.lower()
+
+
+def test_gemini_gets_a_json_schema_the_api_accepts(make_scene, tmp_path, monkeypatch) -> None:
+    """The real API rejects `additional_properties` inside responseSchema; the fake does too."""
+    result, server = _run(make_scene, tmp_path, monkeypatch, "gemini", [(200, DESC, 0), (200, GOOD, 0)])
+    config = server.requests[0]["body"]["generationConfig"]
+    assert "responseJsonSchema" in config and "responseSchema" not in config
+    assert config["responseJsonSchema"]["additionalProperties"] is False
+    assert not result.provenance.fallback
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_dropped_connection_is_retried(make_scene, tmp_path, monkeypatch, kind) -> None:
+    result, server = _run(
+        make_scene, tmp_path, monkeypatch, kind, [("close", "", 0), (200, DESC, 0), ("close", "", 0), (200, GOOD, 0)]
+    )
+    assert not result.provenance.fallback and len(server.requests) == 4
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_a_429_suggested_delay_is_honoured(make_scene, tmp_path, monkeypatch, kind) -> None:
+    import time
+
+    from tests.pipeline.intents.fake_llm import RETRY_DELAY_S
+
+    start = time.perf_counter()
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(429, "", 0), (200, DESC, 0), (200, GOOD, 0)])
+    assert not result.provenance.fallback and len(server.requests) == 3
+    assert time.perf_counter() - start >= RETRY_DELAY_S  # the back-off alone would be ~0.01 s
+
+
+def test_a_redirect_never_carries_the_key_elsewhere(make_scene, tmp_path, monkeypatch) -> None:
+    elsewhere = FakeServer("openai", [(200, DESC, 0)] * 4)
+    try:
+        script = [("redirect", elsewhere.url + "/v1/chat/completions", 0)] * 4
+        result, _ = _run(make_scene, tmp_path, monkeypatch, "openai", script, max_retries=1)
+    finally:
+        elsewhere.close()
+    assert elsewhere.requests == []  # not followed at all
+    assert result.provenance.fallback and "redirect" in result.llm_error
+    _no_key_anywhere(tmp_path, result)
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_an_echoed_key_is_stored_nowhere(make_scene, tmp_path, monkeypatch, kind) -> None:
+    echo = json.dumps({"description": f"An office. Authorization: Bearer {KEY}"})
+    result, _ = _run(make_scene, tmp_path, monkeypatch, kind, [(200, echo, 0), (200, GOOD, 0)])
+    assert not result.provenance.fallback and "***" in result.description
+    _no_key_anywhere(tmp_path, result)

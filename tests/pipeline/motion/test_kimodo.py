@@ -1,4 +1,4 @@
-"""Kimodo adapter against a fake ``kimodo`` with the real signatures (tests/pipeline/motion/fake_kimodo.py)."""
+"""Kimodo adapter against file-based stand-ins that behave like kimodo and huggingface_hub (fake_kimodo_pkg/)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,16 @@ import pytest
 import torch
 
 from song.config import MotionConfig
+from song.errors import StageError
 from song.geometry.rotations import quat_angle, quat_identity, quat_to_matrix, yaw_of_matrix
 from song.pipeline.motion.generators import make_generator
 from song.pipeline.motion.kimodo import (
     CachedTextEncoder,
     KimodoGenerator,
-    MissingEmbeddingError,
     canonicalize,
     kimodo_availability,
+    plan_segments,
+    sanitize_prompt,
     store_prompt_embedding,
 )
 from song.pipeline.motion.stage import synthesize_motions
@@ -24,13 +26,18 @@ from tests.pipeline.motion import fake_kimodo
 PROMPT = MotionConfig().prompt
 
 
+def _vector(value: float = 1.0) -> np.ndarray:
+    return np.full(fake_kimodo.LLM_DIM, value, dtype=np.float32)
+
+
 @pytest.fixture
 def fake(monkeypatch, tmp_path):
-    state = fake_kimodo.install(monkeypatch, tmp_path / "checkpoints")
+    fake_kimodo.install(monkeypatch, tmp_path)
     cache = tmp_path / "embeddings"
-    store_prompt_embedding(cache, PROMPT, np.ones((7, 16), dtype=np.float32))
+    store_prompt_embedding(cache, PROMPT, _vector())
     cfg = MotionConfig(kimodo_embedding_cache=str(cache), kimodo_max_frames=120, kimodo_steps=12, kimodo_batch_size=4)
-    return state, cfg
+    yield None, cfg
+    fake_kimodo.cleanup()
 
 
 def _plans():
@@ -43,28 +50,28 @@ def _plans():
 
 def test_availability_and_selection(fake):
     _, cfg = fake
-    assert kimodo_availability(cfg.kimodo_model) == ""
+    assert kimodo_availability(cfg) == ""
     generator, reason = make_generator(cfg)
     assert isinstance(generator, KimodoGenerator) and reason == ""
 
 
 def test_what_kimodo_receives(fake):
-    state, cfg = fake
+    _, cfg = fake
     plans = _plans()
     KimodoGenerator(cfg).generate(plans, ["a", "b", "c"], [11, 12, 13])
-    model = state.models[0]
+    model = fake_kimodo.models()[0]
     batched, multi = model.calls
     # short tracks: one batched call, one constraint list per sample, the paper's prompt
     assert batched["prompts"] == [PROMPT, PROMPT] and batched["num_samples"] == 2
     assert batched["num_frames"] == [90, 90] and not batched["multi_prompt"]
     assert batched["steps"] == 12 and batched["post_processing"] is True and batched["return_numpy"] is True
     assert torch.equal(batched["first_heading_angle"], torch.zeros(2))
-    assert batched["text_feat_shape"] == (2, 7, 16) and batched["text_lengths"] == [7, 7]
+    assert batched["text_feat_shape"] == (2, 1, fake_kimodo.LLM_DIM)  # one pooled vector per prompt
     for group, plan in zip(batched["constraint_lst"], plans[:2], strict=True):
         (constraint,) = group
         root = constraint.smooth_root_2d
         assert root.dtype == torch.float32 and root.shape == (90, 2)
-        assert torch.equal(constraint.frame_indices, torch.arange(90))
+        assert torch.equal(constraint.frame_indices, torch.arange(90)) and constraint.frame_indices.device.type == "cpu"
         assert np.allclose(root[0].numpy(), 0.0)  # frame 0 at the origin
         heading = fake_kimodo.heading_from(constraint)
         assert abs(heading[0]) < 1e-6  # first heading faces +Z
@@ -120,20 +127,114 @@ def test_missing_embedding_falls_back_in_auto_mode(fake, tmp_path):
     results = synthesize_motions(_plans()[:1], ["a"], [1], cfg)
     meta = results[0][1]
     assert meta["generator"]["name"] == "procedural" and meta["generator"]["fallback"] is True
-    assert "MissingEmbeddingError" in meta["generator"]["fallback_reason"]
-    with pytest.raises(MissingEmbeddingError):
+    assert "no cached embedding" in meta["generator"]["fallback_reason"]  # found before loading the model
+    with pytest.raises(StageError, match="no cached embedding"):
         synthesize_motions(_plans()[:1], ["a"], [1], cfg.model_copy(update={"generator": "kimodo"}))
 
 
-def test_cached_encoder_pads_and_canonical_frame():
+def test_cached_encoder_returns_pooled_vectors_and_canonical_frame():
     import tempfile
 
     with tempfile.TemporaryDirectory() as folder:
-        store_prompt_embedding(folder, "a b", np.ones((3, 4)))
-        store_prompt_embedding(folder, "c", np.full((5, 4), 2.0))
+        store_prompt_embedding(folder, "a b", _vector(1.0))
+        store_prompt_embedding(folder, "c", _vector(2.0)[None])  # (1, 4096) as LLM2Vec returns it
         feat, lengths = CachedTextEncoder(folder)(["a  b", "c"])  # whitespace is sanitised away
-    assert feat.shape == (2, 5, 4) and lengths == [3, 5] and float(feat[0, 3:].abs().sum()) == 0.0
+        one, length = CachedTextEncoder(folder)("c")
+        with pytest.raises(ValueError, match="pooled"):
+            store_prompt_embedding(folder, "d", np.ones((7, 16)))  # token embeddings are not what Kimodo uses
+    assert feat.shape == (2, 1, fake_kimodo.LLM_DIM) and lengths == [1, 1] and float(feat[1].mean()) == 2.0
+    assert one.shape == (1, fake_kimodo.LLM_DIM) and length == 1
     plan = trajectory_from_profiles(0, np.full(30, 1.0), np.zeros(30), start=(5.0, 5.0, np.pi / 2))
     canon = canonicalize(plan, plan.t)
     assert np.allclose(canon["root_2d"][:, 0], 0.0, atol=1e-12) and canon["root_2d"][-1, 1] > 0.9
     assert float(canon["yaw0"]) == pytest.approx(np.pi / 2)
+
+
+PROMPTS = [
+    " A person is    walking.",
+    "someone go forward",
+    "a person WALKS quickly!!  then stops",
+    "...walks forward ,",
+    "walks. turns around? sits down!",
+    '"quoted" prompt"',
+    "a",
+    "   ",
+    "ends with a bracket)",
+]
+
+
+def test_one_sanitiser_that_matches_kimodos(fake):
+    from kimodo.sanitize import sanitize_texts
+
+    assert [sanitize_prompt(p) for p in PROMPTS] == sanitize_texts(PROMPTS)
+    assert sanitize_prompt("someone go forward") == "Someone go forward."
+    assert sanitize_prompt("a person WALKS quickly") == "A person walks quickly."
+
+
+def test_segments_keep_every_generated_window_within_the_limit():
+    for n in (301, 600, 700, 1234, 3000):
+        lengths = plan_segments(n, 300)
+        windows = [lengths[0]] + [b + 5 + int(0.1 * a) for a, b in zip(lengths[:-1], lengths[1:], strict=False)]
+        assert sum(lengths) == n and max(windows) <= 300
+    assert plan_segments(300, 300) == [300]
+
+
+def test_long_track_windows_and_base_step_cap(fake):
+    _, cfg = fake
+    cfg = cfg.model_copy(update={"kimodo_max_frames": 300, "kimodo_steps": 100})  # the fake's schedule has 50
+    long = trajectory_from_profiles(0, np.full(700, 0.7), 0.2 * np.sin(np.arange(700) / 50), start=(0.0, 0.0, 0.0))
+    (motion,) = KimodoGenerator(cfg).generate([long], ["a"], [5])
+    (call,) = fake_kimodo.models()[0].calls
+    assert call["multi_prompt"] and max(call["windows"]) <= 300 and sum(call["num_frames"]) == 700
+    assert call["steps"] == fake_kimodo.BASE_STEPS and motion.info["denoising_steps"] == fake_kimodo.BASE_STEPS
+
+
+def test_constraints_on_the_cpu_whatever_the_model_device(fake):
+    """Kimodo's post-processing indexes CPU tensors with the frame indices (a device mismatch otherwise)."""
+    _, cfg = fake
+    motions = KimodoGenerator(cfg, device="meta").generate(_plans()[:1], ["a"], [3])  # a non-CPU model device
+    assert len(motions) == 1
+
+
+def test_partial_model_names_resolve(fake):
+    _, cfg = fake
+    cfg = cfg.model_copy(update={"kimodo_model": "SOMA"})
+    assert kimodo_availability(cfg) == ""
+    (motion,) = KimodoGenerator(cfg).generate(_plans()[:1], ["a"], [3])
+    assert motion.info["model"] == "kimodo-soma-rp"
+
+
+def test_weights_from_the_hub_cache_and_no_download_ever(monkeypatch, tmp_path):
+    fake_kimodo.install(monkeypatch, tmp_path, where="hf_cache")
+    try:
+        import huggingface_hub  # imported first, online: it read HF_HUB_OFFLINE=0 at import
+
+        assert huggingface_hub.constants.HF_HUB_OFFLINE is False
+        cache = tmp_path / "embeddings"
+        store_prompt_embedding(cache, PROMPT, _vector())
+        cfg = MotionConfig(kimodo_embedding_cache=str(cache), kimodo_max_frames=120, kimodo_steps=12)
+        assert kimodo_availability(cfg) == ""
+        (motion,) = KimodoGenerator(cfg).generate(_plans()[:1], ["a"], [3])
+        assert motion.info["name"] == "kimodo" and huggingface_hub.DOWNLOADS == []
+        # weights gone from the cache: the hub must refuse offline, never try a download
+        for path in (tmp_path / "hf_cache").rglob("config.yaml"):
+            path.unlink()
+        with pytest.raises(Exception, match="HF_HUB_OFFLINE|config.yaml"):
+            KimodoGenerator(cfg).load()
+        assert huggingface_hub.DOWNLOADS == []
+    finally:
+        fake_kimodo.cleanup()
+
+
+def test_availability_names_what_is_missing(monkeypatch, tmp_path):
+    fake_kimodo.install(monkeypatch, tmp_path, motion_correction=False)
+    try:
+        cache = tmp_path / "embeddings"
+        cfg = MotionConfig(kimodo_embedding_cache=str(cache))
+        assert "motion_correction" in kimodo_availability(cfg)
+        cfg = cfg.model_copy(update={"kimodo_postprocess": False})
+        assert "embedding" in kimodo_availability(cfg)
+        store_prompt_embedding(cache, cfg.prompt, _vector())
+        assert kimodo_availability(cfg) == ""
+    finally:
+        fake_kimodo.cleanup()
