@@ -55,7 +55,9 @@ def import_command(
     """Import a real Gaussian avatar (e.g. an LHM export): orient, ground, scale, skin, validate."""
     from song.datasets.avatars import save_avatar
     from song.datasets.avatars.importer import import_ply_avatar
+    from song.util import check_id
 
-    asset = import_ply_avatar(ply, avatar_id or ply.name.split(".")[0], height, up, forward)
+    avatar_id = check_id(avatar_id or ply.name.split(".")[0], "--id")  # before any work: it names a file
+    asset = import_ply_avatar(ply, avatar_id, height, up, forward)
     path = save_avatar(asset, out)
     console.print(f"wrote {path}: {len(asset):,} Gaussians, {asset.height_m:.2f} m")
