@@ -55,20 +55,33 @@ class IntentsConfig(_Section):
     min_path_m: float = Field(2.0, ge=0.0, description="shortest accepted geodesic route, m")
     max_path_m: float = Field(40.0, gt=0.0, description="longest accepted geodesic route, m")
     min_spawn_separation_m: float = Field(0.8, ge=0.0, description="no two starts closer than this, m")
+    speed_profile: Literal["paper", "human"] = Field(
+        "paper", description="paper: uniform in [speed_min, speed_max]; human: normal(1.3, 0.2) clipped to 0.8-1.8 m/s"
+    )
     speed_min_mps: float = Field(0.5, gt=0.0, description="pedestrian speed lower bound, m/s (paper)")
     speed_max_mps: float = Field(1.0, gt=0.0, description="pedestrian speed upper bound, m/s (paper)")
-    max_depart_s: float = Field(3.0, ge=0.0, description="departure times drawn in [0, this], s")
+    max_depart_s: float = Field(5.0, ge=0.0, description="first departures drawn in [0, this], s")
+    scenario_s: float = Field(60.0, gt=0.0, description="routines are chained to keep people busy this long, s")
+    max_legs: int = Field(4, ge=1, le=8, description="most legs (object-to-object walks) in one routine")
 
 
 class CrowdConfig(_Section):
     """Navmesh + ORCA crowd planning (paper: Recast/DetourCrowd)."""
 
     fps: int = Field(DEFAULT_FPS, ge=1, le=240, description="simulation and output rate, frames/s (paper: 30)")
-    avoidance: Literal["orca"] = Field("orca", description="local-avoidance model (song.pipeline.crowd.avoidance)")
+    avoidance: Literal["orca", "social_force"] = Field(
+        "orca", description="local-avoidance model (song.pipeline.crowd.avoidance; docs/crowd.md says why ORCA)"
+    )
     agent_radius_m: float = Field(0.25, gt=0.0, le=1.0, description="pedestrian body radius, m")
+    comfort_distance_m: float = Field(
+        1.0, ge=0.0, le=3.0, description="centre distance people keep when passing in open space, m (≥ 2 × radius)"
+    )
+    wall_comfort_m: float = Field(
+        0.1, ge=0.0, le=1.0, description="extra distance kept from walls when there is room, m"
+    )
     neighbor_dist_m: float = Field(5.0, gt=0.0, description="ORCA neighbour search distance, m")
     max_neighbors: int = Field(10, ge=1, description="ORCA neighbours considered per agent")
-    time_horizon_s: float = Field(2.0, gt=0.0, description="ORCA agent time horizon, s")
+    time_horizon_s: float = Field(4.0, gt=0.0, description="ORCA agent time horizon (how early people deviate), s")
     time_horizon_obst_s: float = Field(1.0, gt=0.0, description="ORCA obstacle time horizon, s")
     max_accel_mps2: float = Field(2.0, gt=0.0, description="acceleration clamp, m/s²")
     max_duration_s: float = Field(120.0, gt=0.0, description="longest simulated scenario, s")

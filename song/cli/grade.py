@@ -25,5 +25,8 @@ def grade(
     console.print(
         status_table(f"{result.summary['episodes']} episodes in {run}/manifest", rows, ["difficulty", *modes])
     )
+    for factor, report in result.summary["bins"].items():
+        occupancy = " / ".join(str(c) for c in report["occupancy"])
+        console.print(f"{factor}: bins {occupancy} (easy→hard), {report['distinct']} distinct values")
     for scene, why in sorted(result.summary["infeasible"].items()):
         console.print(f"[yellow]infeasible[/yellow] {scene}: {why}")

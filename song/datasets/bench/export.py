@@ -302,6 +302,13 @@ def export_bench(
                 "eta_col": robot.eta_col,
             },
             pedestrian_radius_m=config.crowd.agent_radius_m,
+            crowd={
+                "avoidance": config.crowd.avoidance,
+                "comfort_distance_m": config.crowd.comfort_distance_m,
+                "speed_profile": config.intents.speed_profile,
+                "scenario_s": config.intents.scenario_s,
+                "max_legs": config.intents.max_legs,
+            },
             counts=counts,
             tables={
                 name: TableInfo(path=rel, rows=rows_by_path[rel], columns=list(schema.names))

@@ -55,6 +55,11 @@ class Info(BaseModel):
     pedestrian_radius_m: float | None = Field(
         None, description="pedestrian body radius, m (schema ≥ 1.1; releases of 1.0 used the default 0.25 m)"
     )
+    crowd: dict[str, Any] | None = Field(
+        None,
+        description="how the pedestrians were made: avoidance, speed_profile, comfort_distance_m, scenario_s, "
+        "max_legs (schema ≥ 1.3)",
+    )
     counts: dict[str, Any]
     tables: dict[str, TableInfo]
     fingerprint: str = Field(..., description="sha256 of the sorted manifest and of this file without this field")

@@ -10,7 +10,8 @@ import pyarrow as pa
 
 from song.datasets.run.crowd import CROWD_COLUMNS
 
-SCHEMA_VERSION = "1.2.0"  # 1.1: info.json records the pedestrian body radius; 1.2: the fingerprint covers info.json
+SCHEMA_VERSION = "1.3.0"  # 1.1: info.json records the pedestrian body radius; 1.2: the fingerprint covers info.json;
+# 1.3: info.json records how the crowd was made (avoidance model, speed profile, personal space, scenario length)
 INFO_FINGERPRINT_SINCE = (1, 2, 0)  # releases of this schema or later fingerprint their info.json too
 FORMAT_NAME = "song.bench"
 PARQUET_COMPRESSION = "zstd"

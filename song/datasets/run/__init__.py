@@ -17,7 +17,7 @@ from song.datasets.run.crowd import (
     write_crowd,
     write_crowd_status,
 )
-from song.datasets.run.intents import Intent, IntentSet, Provenance, RejectedIntent, read_intents
+from song.datasets.run.intents import Intent, IntentSet, Leg, Provenance, RejectedIntent, read_intents
 from song.datasets.run.layout import RunFolder, RunInfo, SceneFolder, read_run_info, traj_dir_name, write_run_info
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "CrowdTracks",
     "Intent",
     "IntentSet",
+    "Leg",
     "PedestrianStatus",
     "Provenance",
     "RejectedIntent",

@@ -14,7 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from song.datasets.run.layout import INTENTS_FILE
 from song.errors import StageError
 
-INTENTS_SCHEMA_VERSION = 1
+INTENTS_SCHEMA_VERSION = 2  # 2: routines of several legs with dwell times
 
 
 class Provenance(BaseModel):
@@ -27,8 +27,23 @@ class Provenance(BaseModel):
     prompt_sha256: str = ""
 
 
+class Leg(BaseModel):
+    """One walk of a routine: to an object, then a stay there."""
+
+    model_config = ConfigDict(extra="forbid")
+    activity: str
+    goal_object: str
+    goal_xy: tuple[float, float]
+    geodesic_m: float = Field(0.0, ge=0.0, description="grid shortest-path length from the previous stop, m")
+    dwell_s: float = Field(0.0, ge=0.0, description="time spent at the goal before the next leg (0 on the last), s")
+
+
 class Intent(BaseModel):
-    """One executable pedestrian routine. Points are world metres (Z-up), times seconds."""
+    """One executable pedestrian routine. Points are world metres (Z-up), times seconds.
+
+    ``legs`` is the whole routine, in order; ``activity``, ``goal_object``, ``goal_xy`` and
+    ``geodesic_m`` repeat its first leg. After its last leg a pedestrian stands at that goal.
+    """
 
     model_config = ConfigDict(extra="forbid")
     id: int = Field(..., ge=0, description="pedestrian id within the scene")
@@ -41,6 +56,15 @@ class Intent(BaseModel):
     depart_time: float = Field(..., ge=0.0, description="departure time after scenario start, s")
     geodesic_m: float = Field(0.0, ge=0.0, description="grid shortest-path length start→goal, m")
     provenance: Provenance
+    legs: list[Leg] = Field(default_factory=list, description="the routine's legs, the first one included")
+
+    def route(self) -> list[Leg]:
+        """The legs of the routine (a single leg built from the fields above when ``legs`` is empty)."""
+        if self.legs:
+            return list(self.legs)
+        return [
+            Leg(activity=self.activity, goal_object=self.goal_object, goal_xy=self.goal_xy, geodesic_m=self.geodesic_m)
+        ]
 
 
 class RejectedIntent(BaseModel):
@@ -75,11 +99,27 @@ class IntentSet(BaseModel):
 
 
 def read_intents(path: str | Path) -> IntentSet:
-    """Read ``intents.json`` (a file, or the scene folder holding it)."""
+    """Read ``intents.json`` (a file, or the scene folder holding it).
+
+    Raises:
+        StageError: unreadable, malformed, or written by another schema version (with what to do).
+    """
+    import json
+
     path = Path(path)
     if path.is_dir():
         path = path / INTENTS_FILE
     try:
-        return IntentSet.model_validate_json(path.read_bytes())
-    except (OSError, ValueError) as exc:
+        raw = path.read_bytes()
+        version = json.loads(raw).get("schema_version")
+    except (OSError, ValueError, AttributeError) as exc:
+        raise StageError(f"{path}: cannot read intents: {exc}") from exc
+    if version != INTENTS_SCHEMA_VERSION:
+        raise StageError(
+            f"{path}: intents schema_version {version} is not {INTENTS_SCHEMA_VERSION} (routines of several legs "
+            "since 2); re-run the intents stage: `song rerun intents --run RUN` (or `song synth`, it resumes)"
+        )
+    try:
+        return IntentSet.model_validate_json(raw)
+    except ValueError as exc:
         raise StageError(f"{path}: cannot read intents: {exc}") from exc

@@ -224,7 +224,7 @@ def _obstacle_lines(p, v, radius, max_speed, points, nxt, prv, dirs, convex, lef
 
 
 @_jit
-def _agent_line(lines, n, px, py, vx, vy, r, qx, qy, wx, wy, r_other, time_horizon, time_step):
+def _agent_line(lines, n, px, py, vx, vy, r, qx, qy, wx, wy, r_other, time_horizon, time_step, share):
     rpx, rpy = qx - px, qy - py
     rvx, rvy = vx - wx, vy - wy
     dist_sq = rpx * rpx + rpy * rpy
@@ -257,7 +257,7 @@ def _agent_line(lines, n, px, py, vx, vy, r, qx, qy, wx, wy, r_other, time_horiz
         dx, dy = uy, -ux
         k = comb * inv_dt - w_len
         u_x, u_y = k * ux, k * uy
-    return _add_line(lines, n, vx + 0.5 * u_x, vy + 0.5 * u_y, dx, dy)
+    return _add_line(lines, n, vx + share * u_x, vy + share * u_y, dx, dy)
 
 
 @_jit
@@ -340,20 +340,26 @@ def _lp3(lines, n, n_obst, begin, radius, rx, ry, proj):
 
 
 @_jit
-def _agent_lines(i, pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, lines, work):  # fmt: skip
-    """Agent i's ORCA lines into ``lines`` (obstacle lines first); returns (count, obstacle-line count)."""
+def _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, lines, work):  # fmt: skip
+    """Agent i's ORCA lines into ``lines`` (obstacle lines first); returns (count, obstacle-line count).
+
+    Walls use ``wall_radii[i]`` and agents ``radii`` (equal in RVO2; a crowd may keep a personal space
+    larger than the body from other people only). With ``static_full`` an agent takes the whole
+    avoidance against a neighbour whose speed limit is 0 (who cannot take its half), else RVO2's half.
+    """
     found_v, found_d, stack, nb_idx, nb_d = work
     n = 0
     if points.shape[0] > 0:
-        n = _obstacle_lines(pos[i], vel[i], radii[i], speeds[i], points, nxt, prv, dirs, convex, left_t,
+        n = _obstacle_lines(pos[i], vel[i], wall_radii[i], speeds[i], points, nxt, prv, dirs, convex, left_t,
                             right_t, root, th_obst, lines, found_v, found_d, stack)  # fmt: skip
     n_obst = n
     count = _agent_neighbours(i, pos, neighbor_dist, max_neighbors, nb_idx, nb_d)
     for k in range(count):
         j = nb_idx[k]
+        share = 1.0 if static_full and speeds[j] == 0.0 else 0.5
         n = _agent_line(lines, n, pos[i, 0], pos[i, 1], vel[i, 0], vel[i, 1], radii[i], pos[j, 0], pos[j, 1],
-                        vel[j, 0], vel[j, 1], radii[j], time_horizon, time_step)  # fmt: skip
+                        vel[j, 0], vel[j, 1], radii[j], time_horizon, time_step, share)  # fmt: skip
     return n, n_obst
 
 
@@ -366,8 +372,8 @@ def _work(n_vertices, max_neighbors):
 
 
 @_jit
-def step_kernel(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-                neighbor_dist, max_neighbors, time_horizon, th_obst, time_step):  # fmt: skip
+def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+                neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full):  # fmt: skip
     """New (N, 2) velocities: every agent's lines, then linearProgram2 (and 3 where 2 is infeasible)."""
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     out = np.zeros((n_agents, 2))
@@ -376,9 +382,9 @@ def step_kernel(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, l
     proj = np.empty((size, 4))
     work = _work(n_vertices, max_neighbors)
     for i in range(n_agents):
-        n, n_obst = _agent_lines(i, pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t,
-                                 root, neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, lines,
-                                 work)  # fmt: skip
+        n, n_obst = _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t,
+                                 right_t, root, neighbor_dist, max_neighbors, time_horizon, th_obst, time_step,
+                                 static_full, lines, work)  # fmt: skip
         fail, rx, ry = _lp2(lines, n, speeds[i], pref[i, 0], pref[i, 1], False)
         if fail < n:
             rx, ry = _lp3(lines, n, n_obst, fail, speeds[i], rx, ry, proj)
@@ -387,8 +393,8 @@ def step_kernel(pos, vel, pref, radii, speeds, points, nxt, prv, dirs, convex, l
 
 
 @_jit
-def lines_kernel(pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step):  # fmt: skip
+def lines_kernel(pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
+                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full):  # fmt: skip
     """Every agent's ORCA lines: ``(lines (N, L, 4) [px, py, dx, dy], counts (N,), obstacle counts (N,))``."""
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     size = n_vertices + max_neighbors + 1
@@ -397,7 +403,8 @@ def lines_kernel(pos, vel, radii, speeds, points, nxt, prv, dirs, convex, left_t
     n_obstacle = np.zeros(n_agents, dtype=np.int64)
     work = _work(n_vertices, max_neighbors)
     for i in range(n_agents):
-        counts[i], n_obstacle[i] = _agent_lines(i, pos, vel, radii, speeds, points, nxt, prv, dirs, convex,
-                                                left_t, right_t, root, neighbor_dist, max_neighbors,
-                                                time_horizon, th_obst, time_step, lines[i], work)  # fmt: skip
+        counts[i], n_obstacle[i] = _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs,
+                                                convex, left_t, right_t, root, neighbor_dist, max_neighbors,
+                                                time_horizon, th_obst, time_step, static_full, lines[i],
+                                                work)  # fmt: skip
     return lines, counts, n_obstacle

@@ -207,7 +207,9 @@ def _legs(rp: Vec, dist_sq: float, radius: float) -> tuple[Vec, Vec]:
     return left, right
 
 
-def _agent_line(p: Vec, v: Vec, r: float, q: Vec, w_other: Vec, r_other: float, params: OrcaParams) -> Line:
+def _agent_line(
+    p: Vec, v: Vec, r: float, q: Vec, w_other: Vec, r_other: float, params: OrcaParams, share: float = 0.5
+) -> Line:
     """The second loop of ``computeNewVelocity``: the ORCA line for one neighbour."""
     rel_pos, rel_vel = _sub(q, p), _sub(v, w_other)
     dist_sq = _dot(rel_pos, rel_pos)
@@ -234,7 +236,7 @@ def _agent_line(p: Vec, v: Vec, r: float, q: Vec, w_other: Vec, r_other: float, 
         unit = (w[0] / w_len, w[1] / w_len)
         direction = (unit[1], -unit[0])
         u = _mul(comb * inv_dt - w_len, unit)
-    return (_add(v, _mul(0.5, u)), direction)
+    return (_add(v, _mul(share, u)), direction)
 
 
 def _lp1(lines: list[Line], no: int, radius: float, opt: Vec, direction_opt: bool) -> Vec | None:
@@ -307,7 +309,14 @@ def _lp3(lines: list[Line], n_obst: int, begin: int, radius: float, result: Vec)
 
 
 def orca_step_reference(
-    positions, velocities, pref_velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams
+    positions,
+    velocities,
+    pref_velocities,
+    radii,
+    max_speeds,
+    obstacles: ObstacleSet | None,
+    params: OrcaParams,
+    wall_radii=None,
 ) -> np.ndarray:
     """Same contract as :func:`song.pipeline.crowd.orca.orca_step`, one agent at a time."""
     pos = [tuple(map(float, q)) for q in np.asarray(positions, dtype=np.float64)]
@@ -315,15 +324,17 @@ def orca_step_reference(
     pref = [tuple(map(float, q)) for q in np.asarray(pref_velocities, dtype=np.float64)]
     radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(pos),))
     speeds = np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (len(pos),))
+    walls = radii if wall_radii is None else np.broadcast_to(np.asarray(wall_radii, dtype=np.float64), (len(pos),))
     out = np.zeros((len(pos), 2))
     for i in range(len(pos)):
         r, speed = float(radii[i]), float(speeds[i])
         lines: list[Line] = []
         if obstacles is not None and obstacles.n_vertices:
-            lines = _obstacle_lines(pos[i], vel[i], r, speed, obstacles, params)
+            lines = _obstacle_lines(pos[i], vel[i], float(walls[i]), speed, obstacles, params)
         n_obst = len(lines)
         for j in _agent_neighbours(i, pos, params):
-            lines.append(_agent_line(pos[i], vel[i], r, pos[j], vel[j], float(radii[j]), params))
+            share = 1.0 if params.static_full_responsibility and speeds[j] == 0.0 else 0.5
+            lines.append(_agent_line(pos[i], vel[i], r, pos[j], vel[j], float(radii[j]), params, share))
         fail, result = _lp2(lines, speed, pref[i], False)
         if fail < len(lines):
             result = _lp3(lines, n_obst, fail, speed, result)

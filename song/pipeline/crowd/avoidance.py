@@ -6,10 +6,25 @@ with ``crowd.avoidance``.
 The simulation hands a model the pedestrians it must steer this frame -- positions, current and
 preferred velocities, body radii, speed limits -- and gets their new velocities back; walls come from
 the navmesh the model was built for. Adding a model is one class here plus one entry in
-:data:`AVOIDANCE_MODELS`.
+:data:`AVOIDANCE_MODELS`. Whatever the model, the simulation afterwards keeps every move on the mesh
+and resolves body overlaps, so contact (centres closer than 2 × body radius) never happens.
 
-- ``orca``: RVO2's optimal reciprocal collision avoidance (:mod:`song.pipeline.crowd.orca`) against
-  the other pedestrians and the navmesh's walls (grown back by the body radius).
+Body and personal space are separate: the body radius (``crowd.agent_radius_m``) is what touches; in
+open space people also keep ``crowd.comfort_distance_m`` between centres when they pass, and
+``crowd.wall_comfort_m`` more than their body from walls, and give that up gracefully where a passage
+is too narrow for it (each pedestrian's personal space shrinks to the room it has to the nearest wall).
+
+- ``orca`` (default): preferred velocities bent aside early from people who would pass closer than the
+  comfort distance (:func:`anticipate`, the personal space as a preference), then RVO2's optimal
+  reciprocal collision avoidance (:mod:`song.pipeline.crowd.orca`) at the body radius against other
+  people (the hard limit), the body radius plus the wall comfort (within the room it has) against
+  walls, and the whole
+  avoidance -- not RVO2's half -- against someone standing still. The time horizon
+  (``crowd.time_horizon_s``, 4 s) is also how far ahead encounters are anticipated.
+- ``social_force``: Helbing & Molnár's social-force model (Phys. Rev. E 51, 4282, 1995) with the
+  pedestrian interaction of Moussaïd et al. (Proc. R. Soc. B 276, 2755, 2009; the anisotropic,
+  velocity-dependent form fitted to controlled experiments) and an exponential wall repulsion:
+  ``dv/dt = (v₀ e − v)/τ + Σⱼ f_ij + f_wall`` with the constants below.
 """
 
 from __future__ import annotations
@@ -24,12 +39,30 @@ from song.geometry.navmesh import Navmesh, obstacle_rings
 from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, build_obstacles, orca_step
 
 WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from the mesh
+ROOM_MARGIN_M = 0.01  # the wall comfort never reaches closer than this to a wall
+ANTICIPATION_GAIN = 2.5  # sideways share of the preferred direction per unit of predicted comfort shortfall
+ANTICIPATION_MARGIN_M = 0.1  # the bend aims this far beyond the comfort distance (it fades to nothing at its aim)
+
+# social force (Moussaïd et al. 2009, Table 1; relaxation time and walls as in pedsim_ros' defaults)
+SF_RELAXATION_S = 0.5  # τ: time to reach the preferred velocity
+SF_STRENGTH = 4.5  # A, m/s²
+SF_LAMBDA = 2.0  # weight of the relative velocity in the interaction direction
+SF_GAMMA = 0.35  # B = γ ‖D‖, the interaction range
+SF_N, SF_N_PRIME = 2.0, 3.0  # angular sharpness of the deceleration (n′) and turning (n) terms
+SF_WALL_STRENGTH = 10.0  # m/s²
+SF_WALL_RANGE_M = 0.2  # exponential decay of the wall repulsion beyond the body, m
+SF_RANGE_M = 5.0  # people farther apart than this do not interact, m
 
 
 class LocalAvoidance(Protocol):
     """A local-avoidance model for one scene (built once per simulation)."""
 
     name: str
+
+    @property
+    def neighbor_dist(self) -> float:
+        """Agents farther apart than this cannot affect each other's answer, m."""
+        ...
 
     def velocities(
         self,
@@ -51,6 +84,75 @@ class LocalAvoidance(Protocol):
         ...
 
 
+class WallDistance:
+    """Distance from a point to the nearest wall (the mesh grown back by its agent radius), m.
+
+    The mesh's triangles are rasterised on its own grid once and a distance transform gives each legal
+    cell its distance to the mesh boundary; adding the agent radius gives the distance to the wall.
+    """
+
+    def __init__(self, mesh: Navmesh) -> None:
+        import cv2
+        from scipy import ndimage
+
+        p = mesh.params
+        rows, cols = p.shape
+        legal = np.zeros((rows, cols), np.uint8)
+        corners = mesh.vertices[mesh.triangles]  # (T, 3, 2) world m
+        px = np.stack(
+            [(corners[..., 0] - p.origin[0]) / p.resolution, rows - (corners[..., 1] - p.origin[1]) / p.resolution], -1
+        )
+        cv2.fillPoly(legal, [np.round(t * 8).astype(np.int32) for t in px], 1, lineType=cv2.LINE_8, shift=3)
+        # a cell centre's distance to the nearest outside cell overstates the distance to the boundary by up
+        # to a cell: take one cell off, so the answer never exceeds the true room
+        self.field = np.maximum(ndimage.distance_transform_edt(legal) - 1.0, 0.0) * p.resolution + p.agent_radius
+        self.params = p
+
+    def at(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) distance to the nearest wall at points (N, 2), m (the agent radius off the mesh)."""
+        p = self.params
+        col = np.minimum(np.maximum(((xy[:, 0] - p.origin[0]) / p.resolution).astype(np.int64), 0), p.shape[1] - 1)
+        row = np.minimum(np.maximum((p.shape[0] - (xy[:, 1] - p.origin[1]) / p.resolution).astype(np.int64), 0),
+                         p.shape[0] - 1)  # fmt: skip
+        return self.field[row, col]
+
+
+def anticipate(
+    positions: np.ndarray, velocities: np.ndarray, preferred: np.ndarray, comfort_distance: float, horizon: float
+) -> np.ndarray:
+    """Preferred velocities bent aside, early, from people who would pass closer than the comfort distance.
+
+    For each walker and each other pedestrian the closest approach is predicted with constant
+    velocities (the walker at its preferred velocity) within ``horizon``; when it falls short of
+    ``comfort_distance`` the walker's preferred direction gains a sideways component away from where
+    the other will be, stronger the shorter the miss and the sooner it comes. The speed is unchanged.
+    The crowd's hard constraints (ORCA at the body radius, walls, overlap resolution) still decide the
+    velocity, so in a passage too narrow for comfort people simply pass at their body distance.
+    """
+    speed = np.hypot(preferred[:, 0], preferred[:, 1])
+    walking = np.flatnonzero(speed > 1e-6)
+    if len(positions) < 2 or not len(walking):
+        return preferred
+    rel_p = positions[None, :, :] - positions[walking, None, :]  # (W, N, 2) walker → other
+    rel_v = velocities[None, :, :] - preferred[walking, None, :]
+    vv = (rel_v * rel_v).sum(-1)
+    t = np.minimum(np.maximum(-(rel_p * rel_v).sum(-1) / np.where(vv > 1e-9, vv, 1.0), 0.0), horizon)
+    miss = rel_p + rel_v * t[..., None]
+    d = np.hypot(miss[..., 0], miss[..., 1])
+    d[np.arange(len(walking)), walking] = np.inf
+    heading = preferred[walking] / speed[walking, None]
+    side = np.column_stack([-heading[:, 1], heading[:, 0]])
+    lateral = (miss * side[:, None, :]).sum(-1)  # which side the other passes on
+    away = np.where(lateral < -1e-6, 1.0, -1.0)  # go to the other side (a tie: to the right, as people do)
+    aim = comfort_distance + ANTICIPATION_MARGIN_M
+    weight = np.maximum(aim - d, 0.0) / aim / (1.0 + t)
+    push = (away * weight).sum(axis=1)
+    bent = heading + ANTICIPATION_GAIN * push[:, None] * side
+    out = preferred.copy()
+    out[walking] = bent / np.maximum(np.hypot(bent[:, 0], bent[:, 1]), 1e-9)[:, None] * speed[walking, None]
+    return out
+
+
 def orca_walls(mesh: Navmesh) -> ObstacleSet | None:
     """ORCA walls: the mesh grown back by its agent radius (+ a 5 mm margin), in RVO2 vertex order."""
     rings = obstacle_rings(mesh, mesh.params.agent_radius + WALL_MARGIN_M)
@@ -58,15 +160,22 @@ def orca_walls(mesh: Navmesh) -> ObstacleSet | None:
 
 
 class OrcaAvoidance:
-    """RVO2's ORCA with the crowd's neighbour distance, neighbour cap and time horizons."""
+    """ORCA with personal space (see the module docstring)."""
 
     name = "orca"
 
     def __init__(self, mesh: Navmesh, cfg: CrowdConfig) -> None:
         self.params = OrcaParams(
-            1.0 / cfg.fps, cfg.neighbor_dist_m, cfg.max_neighbors, cfg.time_horizon_s, cfg.time_horizon_obst_s
+            1.0 / cfg.fps,
+            cfg.neighbor_dist_m,
+            cfg.max_neighbors,
+            cfg.time_horizon_s,
+            cfg.time_horizon_obst_s,
+            static_full_responsibility=True,
         )
         self.walls = orca_walls(mesh)
+        self.wall_distance = WallDistance(mesh)
+        self.comfort, self.wall_comfort = cfg.comfort_distance_m, cfg.wall_comfort_m
 
     @property
     def neighbor_dist(self) -> float:
@@ -81,11 +190,96 @@ class OrcaAvoidance:
         radii: np.ndarray,
         max_speeds: np.ndarray,
     ) -> np.ndarray:
-        """ORCA's new velocities (see :func:`song.pipeline.crowd.orca.orca_step`)."""
-        return orca_step(positions, velocities, preferred, radii, max_speeds, self.walls, self.params)
+        """ORCA's new velocities with personal-space radii (see :func:`song.pipeline.crowd.orca.orca_step`)."""
+        wall = self.wall_distance.at(positions)
+        # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
+        pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
+        wall_radii = np.maximum(np.minimum(wall - ROOM_MARGIN_M, radii + self.wall_comfort * pace), radii)
+        bent = anticipate(positions, velocities, preferred, self.comfort, self.params.time_horizon)
+        return orca_step(positions, velocities, bent, radii, max_speeds, self.walls, self.params, wall_radii)
 
 
-AVOIDANCE_MODELS: dict[str, Callable[[Navmesh, CrowdConfig], LocalAvoidance]] = {"orca": OrcaAvoidance}
+class SocialForceAvoidance:
+    """Helbing–Molnár social forces with Moussaïd et al.'s pedestrian interaction (module docstring)."""
+
+    name = "social_force"
+
+    def __init__(self, mesh: Navmesh, cfg: CrowdConfig) -> None:
+        self.dt = 1.0 / cfg.fps
+        self.wall_distance = WallDistance(mesh)
+        self.wall_comfort = cfg.wall_comfort_m
+        rings = obstacle_rings(mesh, mesh.params.agent_radius)
+        segments = [np.stack([ring, np.roll(ring, -1, axis=0)], axis=1) for ring in rings]
+        self.segments = np.concatenate(segments) if segments else np.zeros((0, 2, 2))
+
+    @property
+    def neighbor_dist(self) -> float:
+        """Agents farther apart than this cannot affect each other's answer, m."""
+        return SF_RANGE_M
+
+    def _wall_force(self, positions: np.ndarray, radii: np.ndarray, pace: np.ndarray) -> np.ndarray:
+        """Repulsion from the nearest wall point, decaying beyond the body plus the wall comfort.
+
+        Both fade with ``pace`` (preferred over top speed): someone slowing down to arrive at a counter
+        steps close to it.
+        """
+        force = np.zeros_like(positions)
+        near = np.flatnonzero(self.wall_distance.at(positions) < radii + self.wall_comfort + 5 * SF_WALL_RANGE_M)
+        if not len(near) or not len(self.segments):
+            return force
+        a, b = self.segments[:, 0], self.segments[:, 1]
+        ab = b - a
+        p = positions[near][:, None, :]
+        t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+        closest = a + t[..., None] * ab
+        away = p - closest
+        dist = np.hypot(away[..., 0], away[..., 1])
+        k = dist.argmin(axis=1)
+        d = dist[np.arange(len(near)), k]
+        normal = away[np.arange(len(near)), k] / np.maximum(d, 1e-9)[:, None]
+        gap = d - radii[near] - self.wall_comfort * pace[near]
+        fade = np.maximum(2.0 * pace[near] - 1.0, 0.0)  # gone in the last r of an arrival
+        force[near] = (SF_WALL_STRENGTH * fade * np.exp(-gap / SF_WALL_RANGE_M))[:, None] * normal
+        return force
+
+    def velocities(
+        self,
+        positions: np.ndarray,
+        velocities: np.ndarray,
+        preferred: np.ndarray,
+        radii: np.ndarray,
+        max_speeds: np.ndarray,
+    ) -> np.ndarray:
+        """One explicit Euler step of the forces; speeds clamped to the limits."""
+        pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
+        force = (preferred - velocities) / SF_RELAXATION_S + self._wall_force(positions, radii, pace)
+        n = len(positions)
+        if n > 1:
+            rel = positions[None, :, :] - positions[:, None, :]  # i → j
+            dist = np.hypot(rel[..., 0], rel[..., 1])
+            np.fill_diagonal(dist, np.inf)
+            e = rel / np.maximum(dist, 1e-9)[..., None]
+            interaction = SF_LAMBDA * (velocities[:, None, :] - velocities[None, :, :]) + e
+            size = np.maximum(np.hypot(interaction[..., 0], interaction[..., 1]), 1e-9)
+            t = interaction / size[..., None]
+            normal = np.stack([-t[..., 1], t[..., 0]], axis=-1)  # left normal of t
+            theta = np.arctan2(t[..., 0] * e[..., 1] - t[..., 1] * e[..., 0], (t * e).sum(-1))  # from t to e
+            b = SF_GAMMA * size
+            decel = -np.exp(-dist / b - (SF_N_PRIME * b * theta) ** 2)
+            turn = -np.sign(theta) * np.exp(-dist / b - (SF_N * b * theta) ** 2)
+            pair = SF_STRENGTH * (decel[..., None] * t + turn[..., None] * normal)
+            pair[dist > SF_RANGE_M] = 0.0
+            force += pair.sum(axis=1)
+        new = velocities + self.dt * force
+        speed = np.hypot(new[:, 0], new[:, 1])
+        scale = np.minimum(1.0, max_speeds / np.maximum(speed, 1e-12))
+        return new * scale[:, None]
+
+
+AVOIDANCE_MODELS: dict[str, Callable[[Navmesh, CrowdConfig], LocalAvoidance]] = {
+    "orca": OrcaAvoidance,
+    "social_force": SocialForceAvoidance,
+}
 
 
 def make_avoidance(mesh: Navmesh, cfg: CrowdConfig) -> LocalAvoidance:

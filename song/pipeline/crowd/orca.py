@@ -42,6 +42,8 @@ class OrcaParams:
         max_neighbors: at most this many (the nearest) neighbours per agent.
         time_horizon: agent half-planes keep collisions out for this long, s.
         time_horizon_obst: obstacle half-planes keep collisions out for this long, s.
+        static_full_responsibility: an agent takes the whole avoidance against a neighbour whose speed
+            limit is 0 (a standing person cannot take its half); RVO2 always splits it (False).
     """
 
     time_step: float
@@ -49,6 +51,7 @@ class OrcaParams:
     max_neighbors: int
     time_horizon: float
     time_horizon_obst: float
+    static_full_responsibility: bool = False
 
 
 @dataclass(frozen=True)
@@ -224,10 +227,14 @@ _NO_OBSTACLES = (
 )
 
 
-def _kernel_args(positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams):
+def _kernel_args(
+    positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams, wall_radii=None
+):
     pos = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
     n = len(pos)
     vel = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 2)
+    walls = radii if wall_radii is None else wall_radii
+    walls = np.ascontiguousarray(np.broadcast_to(np.asarray(walls, dtype=np.float64), (n,)))
     radii = np.ascontiguousarray(np.broadcast_to(np.asarray(radii, dtype=np.float64), (n,)))
     speeds = np.ascontiguousarray(np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (n,)))
     if obstacles is None or obstacles.n_vertices == 0:
@@ -251,7 +258,7 @@ def _kernel_args(positions, velocities, radii, max_speeds, obstacles: ObstacleSe
         float(params.time_horizon_obst),
         float(params.time_step),
     )
-    return pos, vel, radii, speeds, tree, scalars
+    return pos, vel, (radii, walls), speeds, tree, (*scalars, bool(params.static_full_responsibility))
 
 
 def orca_step(
@@ -262,6 +269,7 @@ def orca_step(
     max_speeds: np.ndarray,
     obstacles: ObstacleSet | None,
     params: OrcaParams,
+    wall_radii: np.ndarray | None = None,
 ) -> np.ndarray:
     """New velocities of all agents (RVO2's ``computeNewVelocity`` for each).
 
@@ -269,7 +277,8 @@ def orca_step(
         positions: (N, 2) m.
         velocities: (N, 2) current velocities, m/s.
         pref_velocities: (N, 2) preferred velocities, m/s.
-        radii: (N,) or scalar, m.
+        radii: (N,) or scalar: radii against other agents, m.
+        wall_radii: (N,) or scalar radii against the walls (default: ``radii``), m.
         max_speeds: (N,) or scalar, m/s.
         obstacles: walls from :func:`build_obstacles`, or None.
         params: shared ORCA parameters.
@@ -277,9 +286,11 @@ def orca_step(
     Returns:
         (N, 2) float64 new velocities, m/s.
     """
-    pos, vel, radii, speeds, tree, scalars = _kernel_args(positions, velocities, radii, max_speeds, obstacles, params)
+    pos, vel, (radii, walls), speeds, tree, scalars = _kernel_args(
+        positions, velocities, radii, max_speeds, obstacles, params, wall_radii
+    )
     pref = np.ascontiguousarray(pref_velocities, dtype=np.float64).reshape(-1, 2)
-    return step_kernel(pos, vel, pref, radii, speeds, *tree, *scalars)
+    return step_kernel(pos, vel, pref, radii, walls, speeds, *tree, *scalars)
 
 
 def orca_lines(
@@ -296,8 +307,10 @@ def orca_lines(
         per agent ``(points (L, 2), directions (L, 2), n_obstacle_lines)``; obstacle lines come first,
         velocities left of a line's direction are allowed.
     """
-    pos, vel, radii, speeds, tree, scalars = _kernel_args(positions, velocities, radii, max_speeds, obstacles, params)
-    lines, counts, n_obstacle = lines_kernel(pos, vel, radii, speeds, *tree, *scalars)
+    pos, vel, (radii, walls), speeds, tree, scalars = _kernel_args(
+        positions, velocities, radii, max_speeds, obstacles, params
+    )
+    lines, counts, n_obstacle = lines_kernel(pos, vel, radii, walls, speeds, *tree, *scalars)
     return [
         (lines[i, :c, :2], lines[i, :c, 2:], int(k)) for i, (c, k) in enumerate(zip(counts, n_obstacle, strict=True))
     ]

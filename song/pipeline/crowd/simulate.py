@@ -19,8 +19,9 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    reason recorded, and the crowd is simulated again without it. (Yielding took the sample scenes
    from 59 to 61 arrivals of 63.)
 
-Pedestrians exist for the whole scenario: they stand at their start until departure and at their goal
-after arriving, and others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``).
+Pedestrians exist for the whole scenario: they stand at their start until departure, walk their
+routine's legs with a dwell at every intermediate stop, and stand at the last goal after arriving;
+others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``).
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ YIELD_S, MAX_YIELDS = 3.0, 2  # a pedestrian still stalled after its replan stan
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
 HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
 STAND_SPEED = 0.05  # m/s: below this the heading is held
+ASIDE_M, ASIDE_DIRECTIONS = 0.7, 12  # how far, and among how many directions, a standing blocker steps aside
 OVERLAP_PASSES = 3
 OVERLAP_MARGIN_M = 0.002  # overlap passes separate centres to 2r + this
 MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
@@ -98,6 +100,9 @@ class _Walkers:
     yields: np.ndarray  # (N,) int: how often it has yielded
     heading: np.ndarray  # (N,) rad
     smooth: np.ndarray  # (N, 2) smoothed velocity, m/s
+    stops: list[list[tuple[np.ndarray, float]]]  # per pedestrian: its legs' goals (on the mesh) and dwells
+    leg: np.ndarray  # (N,) int: the leg being walked
+    dwell_until: np.ndarray  # (N,) s: standing at an intermediate stop until then
 
 
 def _suffix(path: np.ndarray) -> np.ndarray:
@@ -136,22 +141,29 @@ def _plan(mesh: Navmesh, start: np.ndarray, goal: np.ndarray) -> np.ndarray | No
 
 
 def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, rng: np.random.Generator):
-    """Snapped, jittered starts; goals; paths. Returns (walkers, failures {index: reason})."""
+    """Snapped, jittered starts; every leg's goal snapped; first paths. Returns (walkers, failures {index: reason})."""
     n = len(intents)
     raw = np.array([i.start_xy for i in intents], dtype=np.float64).reshape(n, 2)
-    goal_raw = np.array([i.goal_xy for i in intents], dtype=np.float64).reshape(n, 2)
+    routes = [i.route() for i in intents]
     pos, tri, _ = mesh.snap(raw, MAX_SNAP_M)
-    goal, gtri, _ = mesh.snap(goal_raw, MAX_SNAP_M)
+    stops, failures = [], {}
+    for k, route in enumerate(routes):
+        goals, gtri, _ = mesh.snap(np.array([leg.goal_xy for leg in route], dtype=np.float64), MAX_SNAP_M)
+        stops.append([(goals[j], float(leg.dwell_s)) for j, leg in enumerate(route)])
+        if (gtri < 0).any():
+            failures[k] = f"goal of leg {int(np.argmax(gtri < 0)) + 1} is more than {MAX_SNAP_M} m off the navmesh"
+        elif tri[k] >= 0 and len({int(mesh.component[t]) for t in [tri[k], *gtri]}) > 1:
+            failures[k] = "a leg's goal is not reachable on the navmesh"
+    goal = np.array([s[0][0] for s in stops]).reshape(n, 2)
     jitter = rng.uniform(-cfg.start_jitter_m, cfg.start_jitter_m, (n, 2))  # breaks exact symmetry
     if n:
         pos = np.where((tri >= 0)[:, None], mesh.constrain_moves(pos, pos + jitter), pos)
-    failures: dict[int, str] = {}
     paths: list[np.ndarray] = []
     for k in range(n):
-        path = _plan(mesh, pos[k], goal[k]) if tri[k] >= 0 and gtri[k] >= 0 else None
-        if tri[k] < 0 or gtri[k] < 0:
-            failures[k] = f"{'start' if tri[k] < 0 else 'goal'} is more than {MAX_SNAP_M} m off the navmesh"
-        elif path is None:
+        path = _plan(mesh, pos[k], goal[k]) if tri[k] >= 0 and k not in failures else None
+        if tri[k] < 0:
+            failures[k] = f"start is more than {MAX_SNAP_M} m off the navmesh"
+        elif path is None and k not in failures:
             failures[k] = "goal is not reachable on the navmesh"
         paths.append(path if path is not None else goal[k : k + 1].copy())
     d = _length(pos[:, None] - pos[None]) + np.triu(np.full((n, n), np.inf))
@@ -160,12 +172,13 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, rng: np.rando
             failures[int(k)] = f"start overlaps pedestrian {intents[int(j)].id}"
     first = np.array([p[0] for p in paths]).reshape(n, 2)
     heading = np.arctan2(first[:, 1] - pos[:, 1], first[:, 0] - pos[:, 0])
+    depart = np.array([i.depart_time for i in intents], dtype=np.float64)
     w = _Walkers(
         pos=pos,
         vel=np.zeros((n, 2)),
         goal=goal,
         speed=np.array([i.speed for i in intents], dtype=np.float64),
-        depart=np.array([i.depart_time for i in intents], dtype=np.float64),
+        depart=depart,
         paths=paths,
         suffix=[_suffix(p) for p in paths],
         corner=np.zeros(n, dtype=np.int64),
@@ -176,16 +189,35 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, rng: np.rando
         arrived=np.zeros(n, dtype=bool),
         arrival=np.full(n, np.nan),
         best=np.zeros(n),
-        last_progress=np.array([i.depart_time for i in intents], dtype=np.float64),
+        last_progress=depart.copy(),
         replanned=np.full(n, "", dtype=object),
         yield_until=np.zeros(n),
         yields=np.zeros(n, dtype=np.int64),
         heading=heading,
         smooth=np.zeros((n, 2)),
+        stops=stops,
+        leg=np.zeros(n, dtype=np.int64),
+        dwell_until=np.zeros(n),
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
     return w, failures
+
+
+def _next_leg(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
+    """Pedestrian k reached its current stop: dwell there, then walk the next leg. False when it was the last."""
+    stops, leg = w.stops[k], int(w.leg[k])
+    if leg + 1 >= len(stops):
+        return False
+    w.dwell_until[k] = t + stops[leg][1]
+    w.leg[k] = leg + 1
+    w.goal[k] = stops[leg + 1][0]
+    path = _plan(mesh, w.pos[k], w.goal[k])
+    _set_path(w, k, path if path is not None else w.goal[k : k + 1].copy())
+    w.best[k] = _remaining(w, np.array([k]))[0]
+    w.last_progress[k] = w.dwell_until[k]
+    w.replanned[k], w.yields[k] = "", 0
+    return True
 
 
 def _update_corners(w: _Walkers, mesh: Navmesh, moving: np.ndarray, check: bool) -> None:
@@ -260,10 +292,12 @@ def _clamp_speed(w: _Walkers, mesh: Navmesh, target: np.ndarray, dt: float) -> n
     """Sliding along a non-convex wall can lengthen a step a little: shorten it back to the speed limit."""
     disp = target - w.pos
     size = _length(disp)
-    over = np.flatnonzero(size > w.speed * dt)
+    over = np.flatnonzero(size > w.speed * dt * (1 + 1e-9))  # rounding alone is not a violation
     if len(over):
         scaled = w.pos[over] + disp[over] * (w.speed[over] * dt / size[over])[:, None]
-        ok = mesh.segment_clear(w.pos[over], scaled)
+        ok = mesh.segment_clear(w.pos[over], scaled) & mesh.contains(
+            scaled, tol=1e-9
+        )  # a clear segment may end on an edge
         target[over] = np.where(ok[:, None], scaled, w.pos[over])
     return target
 
@@ -298,10 +332,12 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
 
 
 def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, stall_s: float, radius: float):
-    """Record arrivals; replan stalled pedestrians once; return those stalled again (to remove)."""
+    """Record arrivals at stops and at the end; replan stalled pedestrians once; return those stalled again."""
     done = moving & (_length(w.goal - w.pos) < ARRIVE_M)
-    w.arrived |= done  # it stands where it is (no snap: a snap would exceed its speed)
-    w.arrival[done] = t
+    for k in np.flatnonzero(done):
+        if not _next_leg(w, mesh, int(k), t):
+            w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
+            w.arrival[k] = t
     idx = np.flatnonzero(moving & ~done)
     if not len(idx):
         return {}
@@ -324,7 +360,51 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, st
         path, w.replanned[k] = _replan_around_standing(w, mesh, k, moving, radius)
         _set_path(w, k, path)
         w.best[k] = _remaining(w, np.array([k]))[0]
+        if w.replanned[k].startswith("the way is blocked"):
+            _make_room(w, mesh, k, moving, radius, t)
     return failed
+
+
+def _make_room(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float) -> None:
+    """People standing in stalled walker k's way make room.
+
+    Anyone standing within 2r + 0.1 m of k's remaining path: one waiting to depart or dwelling at a
+    stop leaves for its next leg now; one who has finished its routine steps aside to the point, among
+    ``ASIDE_DIRECTIONS`` at ``ASIDE_M`` around it on the mesh, farthest from k's path, and stands there.
+    """
+    path = np.vstack([w.pos[k], w.paths[k][w.corner[k] :]])
+    a, b = path[:-1], path[1:]
+
+    def clearance(points: np.ndarray) -> np.ndarray:
+        if not len(a):
+            return _length(points - w.pos[k])
+        ab = b - a
+        s = np.clip(((points[:, None] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+        return _length(points[:, None] - (a + s[..., None] * ab)).min(axis=1)
+
+    standing = np.flatnonzero(~moving)
+    if not len(standing):
+        return
+    angles = np.arange(ASIDE_DIRECTIONS) * 2 * np.pi / ASIDE_DIRECTIONS
+    ring = ASIDE_M * np.column_stack([np.cos(angles), np.sin(angles)])
+    for j in standing[clearance(w.pos[standing]) < 2 * radius + 0.1]:
+        if not w.arrived[j]:
+            w.depart[j] = min(w.depart[j], t)
+            w.dwell_until[j] = min(w.dwell_until[j], t)
+            continue
+        spots = w.pos[j] + ring
+        spots = spots[mesh.contains(spots)]
+        if not len(spots):
+            continue
+        spot = spots[int(np.argmax(clearance(spots)))]
+        w.stops[j].append((spot, 0.0))
+        w.leg[j] = len(w.stops[j]) - 1
+        w.goal[j] = spot
+        w.arrived[j], w.arrival[j] = False, np.nan
+        path_j = _plan(mesh, w.pos[j], spot)
+        _set_path(w, j, path_j if path_j is not None else spot[None].copy())
+        w.best[j] = _remaining(w, np.array([j]))[0]
+        w.last_progress[j] = t
 
 
 def _replan_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float):
@@ -352,7 +432,7 @@ def _simulate(intents, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfig, r
     out_xy, out_yaw, out_speed = [w.pos.copy()], [w.heading.copy()], [np.zeros(len(w.pos))]
     for frame in range(1, int(cfg.max_duration_s * fps) + 1):
         t = frame / fps
-        moving = (w.depart <= t) & ~w.arrived & (w.yield_until <= t)
+        moving = (w.depart <= t) & ~w.arrived & (w.yield_until <= t) & (w.dwell_until <= t)
         _step_frame(w, mesh, avoid, moving, cfg, frame)
         failed = _check_progress(w, mesh, moving, t, cfg.stall_time_s, cfg.agent_radius_m)
         if failed:

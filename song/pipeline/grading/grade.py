@@ -50,16 +50,38 @@ def corridor_width(path: np.ndarray, robot: RobotMap, step: float) -> float:
 
 
 def tercile_bins(values: np.ndarray, reverse: bool = False) -> np.ndarray:
-    """Three equal-frequency bins (0, 1, 2) by the 1/3 and 2/3 quantiles; equal values share a bin.
+    """Three bins (0, 1, 2) of ascending values, as equal in size as the ties allow.
 
-    With ``reverse`` (corridor width: narrower is harder) the bins are flipped.
+    Equal values always share a bin. Among all ways to cut the sorted distinct values into three
+    consecutive groups, the cut whose bin sizes are closest to n/3 each (least squares) is chosen;
+    equally good cuts prefer non-empty outer bins (the factor keeps its easy and hard ends). A factor
+    with one distinct value says nothing: everything goes to the middle bin. Without ties this is the
+    plain equal-frequency split (sizes differ by at most one). With ``reverse`` (corridor width:
+    narrower is harder) the bins are flipped.
     """
     values = np.asarray(values, dtype=np.float64)
-    if len(values) == 0:
+    n = len(values)
+    if n == 0:
         return np.zeros(0, dtype=np.int8)
-    q1, q2 = np.quantile(values, [1 / 3, 2 / 3])
-    bins = np.where(values <= q1, 0, np.where(values <= q2, 1, 2)).astype(np.int8)
+    distinct, group = np.unique(values, return_inverse=True)
+    if len(distinct) == 1:
+        return np.ones(n, dtype=np.int8)
+    cum = np.concatenate([[0], np.cumsum(np.bincount(group))])  # bin edges may only fall between groups
+    best_key, cuts = None, (0, 0)
+    for i, a in enumerate(cum):
+        j = int(np.searchsorted(cum, a + (n - a) / 2))  # the best second cut is nearest to halving the rest
+        for jj in {max(i, j - 1), min(max(i, j), len(cum) - 1)}:
+            sizes = np.array([a, cum[jj] - a, n - cum[jj]], dtype=np.float64)
+            key = (float(((sizes - n / 3) ** 2).sum()), sizes[0] == 0, sizes[2] == 0)
+            if best_key is None or key < best_key:
+                best_key, cuts = key, (i, jj)
+    bins = np.where(group < cuts[0], 0, np.where(group < cuts[1], 1, 2)).astype(np.int8)
     return (2 - bins).astype(np.int8) if reverse else bins
+
+
+def bin_report(values: np.ndarray, bins: np.ndarray) -> dict:
+    """How a factor was binned: episodes per bin and the number of distinct values (for the summary)."""
+    return {"occupancy": np.bincount(bins, minlength=3).tolist(), "distinct": int(len(np.unique(values)))}
 
 
 def split_difficulty(score: np.ndarray, encounters: np.ndarray, length: np.ndarray, ids: list[str], cfg: GradingConfig):
@@ -167,8 +189,10 @@ def grade_run(
     rows.sort(key=lambda r: r["episode_id"])
     ids = [r["episode_id"] for r in rows]
     values = {f: np.array([r[f] for r in rows], dtype=np.float64) for f in FACTORS}
+    binning = {}
     for factor, name in zip(FACTORS, BINS, strict=True):
         bins = tercile_bins(values[factor], reverse=factor == "corridor_width")
+        binning[factor] = bin_report(values[factor], bins)
         for row, b in zip(rows, bins, strict=True):
             row[name] = int(b)
     score = np.array([sum(r[b] for b in BINS) for r in rows])
@@ -176,7 +200,7 @@ def grade_run(
     for row, s, d in zip(rows, score, difficulty, strict=True):
         row["score"], row["difficulty"] = int(s), str(d)
     table = pa.Table.from_pylist(rows) if rows else pa.table({"episode_id": pa.array([], pa.string())})
-    summary = _summary(rows, infeasible, total)
+    summary = _summary(rows, infeasible, total) | {"bins": binning}
     buffer = io.BytesIO()
     pq.write_table(table, buffer, compression="zstd", compression_level=9)
     write_bytes_atomic(run.episodes_manifest, buffer.getvalue())

@@ -125,13 +125,105 @@ def filter_intents(
                 goal_object=goal_id,
                 start_xy=(round(float(start[0]), 4), round(float(start[1]), 4)),
                 goal_xy=(round(float(goal[0]), 4), round(float(goal[1]), 4)),
-                speed=round(float(rng.uniform(cfg.speed_min_mps, cfg.speed_max_mps)), 4),
+                speed=round(draw_speed(cfg, rng), 4),
                 depart_time=round(float(rng.uniform(0.0, cfg.max_depart_s)), 4),
                 geodesic_m=round(length, 3),
                 provenance=provenance,
             )
         )
     return kept, rejected
+
+
+HUMAN_SPEED_MPS, HUMAN_SPEED_SD, HUMAN_SPEED_RANGE = 1.3, 0.2, (0.8, 1.8)  # free walking of adults indoors
+
+
+def draw_speed(cfg, rng: np.random.Generator) -> float:
+    """A preferred walking speed by ``intents.speed_profile``.
+
+    ``paper``: uniform in [speed_min, speed_max] (0.5–1.0 m/s, the paper's benchmark); ``human``:
+    normal around 1.3 m/s with sd 0.2, clipped to 0.8–1.8 m/s (adults' comfortable walking speed,
+    Bohannon 1997; Weidmann 1993's mean free speed 1.34 m/s).
+    """
+    if cfg.speed_profile == "human":
+        return float(np.clip(rng.normal(HUMAN_SPEED_MPS, HUMAN_SPEED_SD), *HUMAN_SPEED_RANGE))
+    return float(rng.uniform(cfg.speed_min_mps, cfg.speed_max_mps))
+
+
+# dwell at an object, s, by what the object is (first matching keyword): waiting at a counter, working
+# at a desk, browsing a shelf, using a machine; default a short stop
+DWELL_S = (
+    (("counter", "reception", "checkout", "desk", "help", "bar", "pharmacy"), (5.0, 15.0)),
+    (("workstation", "table", "computer", "bed", "sofa", "chair", "seat"), (10.0, 30.0)),
+    (("shelf", "shelving", "book", "stack", "rack", "display"), (5.0, 20.0)),
+    (("printer", "machine", "fridge", "elevator", "sink", "coffee"), (3.0, 10.0)),
+)
+DEFAULT_DWELL_S = (3.0, 12.0)
+
+
+def dwell_time(obj, rng: np.random.Generator) -> float:
+    """How long a pedestrian stays at ``obj`` before walking on, s (by the object's label and category)."""
+    text = f"{obj.label} {obj.category}".lower()
+    low, high = next((span for keys, span in DWELL_S if any(k in text for k in keys)), DEFAULT_DWELL_S)
+    return float(rng.uniform(low, high))
+
+
+def extend_routines(
+    kept: list[Intent], package: ScenePackage, walk: Walkable, snaps: dict[str, np.ndarray], config: SongConfig, rng
+) -> list[Intent]:
+    """Chain more legs after each intent's first, until ``scenario_s`` is covered or ``max_legs`` reached.
+
+    From where it stands, a pedestrian walks on to another reachable object (not the one it just came
+    from) at a geodesic distance within [min_path, max_path], preferring objects related to the current
+    one and longer walks, and standing spots no other pedestrian uses; it dwells at each object
+    (:func:`dwell_time`). The offline model's activity phrases name the later legs.
+    """
+    from song.datasets.run.intents import Leg
+    from song.pipeline.intents.offline import activity_phrase, relatedness
+
+    cfg = config.intents
+    objects = package.semantic_map.object_by_id()
+    taken = [np.asarray(k.start_xy) for k in kept] + [np.asarray(k.goal_xy) for k in kept]
+    routines = []
+    for intent in kept:
+        legs = [
+            Leg(activity=intent.activity, goal_object=intent.goal_object, goal_xy=intent.goal_xy,
+                geodesic_m=intent.geodesic_m, dwell_s=0.0)
+        ]  # fmt: skip
+        clock = intent.depart_time + intent.geodesic_m / intent.speed
+        previous, here = intent.start_object, np.asarray(intent.goal_xy)
+        while len(legs) < cfg.max_legs and clock < cfg.scenario_s:
+            dist = walk.geodesics_from(here[None])[0][0]
+            options, weights, ends = [], [], []
+            for oid, pts in snaps.items():
+                if oid in (legs[-1].goal_object, previous):
+                    continue
+                end = _facing(pts, here)
+                length = walk.geodesic(dist, end)
+                free = all(np.linalg.norm(end - p) >= cfg.min_spawn_separation_m for p in taken)
+                if free and cfg.min_path_m <= length <= cfg.max_path_m:
+                    options.append((oid, length))
+                    ends.append(end)
+                    weights.append((1.0 + 2.0 * relatedness(objects[legs[-1].goal_object], objects[oid])) * length)
+            if not options:
+                break
+            pick = int(rng.choice(len(options), p=np.asarray(weights) / np.sum(weights)))
+            oid, length = options[pick]
+            dwell = dwell_time(objects[legs[-1].goal_object], rng)
+            if clock + dwell + length / intent.speed > cfg.scenario_s:
+                break  # the routine would run past the scenario
+            legs[-1] = legs[-1].model_copy(update={"dwell_s": round(dwell, 3)})
+            end = ends[pick]
+            legs.append(
+                Leg(activity=activity_phrase(package.semantic_map.venue_type, objects[legs[-1].goal_object],
+                                             objects[oid], rng),
+                    goal_object=oid, goal_xy=(round(float(end[0]), 4), round(float(end[1]), 4)),
+                    geodesic_m=round(length, 3))
+            )  # fmt: skip
+            taken.append(end)
+            clock += dwell + length / intent.speed
+            previous, here = legs[-2].goal_object, end
+        routines.append(intent.model_copy(update={"legs": legs}))
+    return routines
 
 
 def choose_provider(llm: str) -> str:
@@ -208,6 +300,7 @@ def generate_intents(
         provenance = Provenance(provider="offline", model=offline.model)
         proposals = offline.propose(package.semantic_map, geodesic, 2 * n, rng)
     kept, rejected = filter_intents(proposals, package, walk, snaps, config, provenance, rng, n)
+    kept = extend_routines(kept, package, walk, snaps, config, rng)
     return IntentSet(
         scene_id=package.scene_id,
         provenance=provenance,

@@ -58,3 +58,24 @@ def test_same_seed_identical_parquet(sample_run: Path, tmp_path: Path) -> None:
     )
     name = "scenes/procthor_house_6/crowd.parquet"
     assert (again / name).read_bytes() == (sample_run / name).read_bytes()
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_routine_chains_are_valid(sample_run: Path, scene: str) -> None:
+    """Each leg is reachable within the path limits, dwells fit their activity, stops are free, routines fit."""
+    cfg = SongConfig().intents
+    intents = read_intents(sample_run / "scenes" / scene).intents
+    walk = walkable(load_scene_package(SAMPLES / scene), R, SongConfig().crowd.contour_error_m)
+    spots = []
+    for intent in intents:
+        legs = intent.route()
+        assert 1 <= len(legs) <= cfg.max_legs
+        assert all(cfg.min_path_m <= leg.geodesic_m <= cfg.max_path_m for leg in legs)
+        assert all(3.0 <= leg.dwell_s <= 30.0 for leg in legs[:-1]) and legs[-1].dwell_s == 0.0
+        assert walk.on_main(np.array([leg.goal_xy for leg in legs])).all()  # every stop reachable
+        busy = intent.depart_time + sum(leg.geodesic_m / intent.speed + leg.dwell_s for leg in legs)
+        assert len(legs) == 1 or busy <= cfg.scenario_s + 1e-6
+        spots += [intent.start_xy] + [leg.goal_xy for leg in legs[1:]]
+    d = np.linalg.norm(np.array(spots)[:, None] - np.array(spots)[None], axis=-1) + np.eye(len(spots)) * 9
+    assert d.min() >= cfg.min_spawn_separation_m - 1e-6  # nobody's standing spot is another's
+    assert sum(len(i.route()) > 1 for i in intents) >= len(intents) // 2  # routines, not single walks

@@ -10,7 +10,7 @@ from song.datasets.scenes import load_scene_package
 from song.geometry.navmesh import Navmesh
 from song.pipeline.crowd.avoidance import make_avoidance
 from song.pipeline.crowd.navmesh import scene_navmesh
-from song.pipeline.crowd.simulate import CrowdPlan, plan_crowd
+from song.pipeline.crowd.simulate import ASIDE_M, CrowdPlan, plan_crowd
 from song.pipeline.crowd.stage import plan_table
 from song.util import derive_rng
 
@@ -61,7 +61,8 @@ def check_tracks(ids, xy, speed, fps: int, status: dict, mesh: Navmesh, intents:
         if info["status"] == "arrived":
             after = t >= info["arrival_s"] - 1e-9
             assert np.allclose(xy[k, after], xy[k, -1])  # stands at the goal after arriving
-            assert np.linalg.norm(xy[k, -1] - by_id[int(ped)].goal_xy) < 0.05 + 0.05  # arrival radius + snap
+            # at its last goal (arrival radius + snap), or stepped aside from it to let a walker pass
+            assert np.linalg.norm(xy[k, -1] - by_id[int(ped)].route()[-1].goal_xy) < ASIDE_M + 0.05 + 0.05
     assert all(v["reason"] for v in status.values() if v["status"] != "arrived")
 
 
@@ -117,16 +118,17 @@ def test_unplannable_pedestrians_are_removed_with_reasons(make_scene) -> None:
     assert list(plan.ped_ids) == [0]
 
 
-def test_blocked_door_removes_the_blocked_walker(make_scene) -> None:
+def test_pedestrian_standing_in_a_door_steps_aside(make_scene) -> None:
     intents = [
         intent(0, (3.0, 3.0), (4.0, 2.0), 0.9, 0.0),  # stands in the door from t ≈ 2 s on
-        intent(1, (0.8, 1.6), (6.5, 1.5), 0.9, 3.0),  # must pass the door afterwards: impossible
+        intent(1, (0.8, 1.6), (6.5, 1.5), 0.9, 3.0),  # must pass the door afterwards
     ]
     plan, mesh = _run(make_scene, intents)
     check_crowd(plan, mesh, intents)
-    assert plan.status[0]["status"] == "arrived"
-    assert plan.status[1]["status"] == "removed"
-    assert "blocked by pedestrians standing" in plan.status[1]["reason"]
+    assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
+    k = list(plan.ped_ids).index(0)
+    aside = np.linalg.norm(plan.xy[k, -1] - np.array(intents[0].goal_xy))
+    assert 0.3 < aside < ASIDE_M + 0.1  # it left the door to the walker and stands next to it
 
 
 def test_empty_and_single_crowds(make_scene) -> None:

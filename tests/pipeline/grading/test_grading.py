@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -10,9 +11,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from song.config import GradingConfig, SongConfig
-from song.datasets.run import read_crowd
+from song.datasets.run import RunFolder, read_crowd
 from song.datasets.scenes import load_scene_package
 from song.pipeline.grading import count_turns, grade_run, split_difficulty, tercile_bins
+from song.pipeline.grading.grade import BINS, FACTORS
 from song.pipeline.grading.sample import Crowd, RobotMap, closest_pass, subtended_deg
 from tests.conftest import SAMPLES
 
@@ -29,6 +31,7 @@ def test_tercile_bins_and_tie_break() -> None:
     np.testing.assert_array_equal(tercile_bins(np.arange(9.0)), [0, 0, 0, 1, 1, 1, 2, 2, 2])
     np.testing.assert_array_equal(tercile_bins(np.arange(9.0), reverse=True), [2, 2, 2, 1, 1, 1, 0, 0, 0])
     assert len(set(tercile_bins(np.array([1.0, 1, 1, 1, 5, 6])).tolist()[:4])) == 1  # ties share a bin
+
     cfg = GradingConfig()
     score = np.array([8, 5, 5, 5, 0, 3, 3, 1, 2, 4])
     enc = np.array([0, 2, 3, 3, 0, 1, 1, 0, 0, 0])
@@ -43,11 +46,42 @@ def test_tercile_bins_and_tie_break() -> None:
     assert count_turns(np.array([[0, 0], [1, 0], [1, 1], [1.2, 2.0]]), 40.0) == 1
 
 
+def _occupancy(values) -> list[int]:
+    return np.bincount(tercile_bins(np.asarray(values, dtype=np.float64)), minlength=3).tolist()
+
+
+def test_tie_aware_bins() -> None:
+    assert _occupancy([4.0] * 7) == [0, 7, 0]  # one value says nothing: all in the middle bin
+    assert _occupancy([0.0] * 60 + [2.0] * 60) == [60, 0, 60]  # two values keep the easy and hard ends
+    # 71 tied at the bottom (the demo's encounters): the rest is split evenly, not 9 / 40
+    assert _occupancy([0.0] * 71 + list(range(1, 50))) == [71, 24, 25]
+    rng = np.random.default_rng(0)
+    for _ in range(50):  # many ties: equal values share a bin, bins are ordered, sizes as equal as ties allow
+        values = rng.integers(0, rng.integers(2, 8), rng.integers(3, 60)).astype(np.float64)
+        bins = tercile_bins(values)
+        for v in np.unique(values):
+            assert len(set(bins[values == v].tolist())) == 1
+        order = np.argsort(values, kind="stable")
+        assert (np.diff(bins[order]) >= 0).all()
+        best = min(  # brute force over every cut between distinct values
+            sum((c - len(values) / 3) ** 2 for c in (np.sum(values < lo), np.sum((values >= lo) & (values < hi)),
+                                                     np.sum(values >= hi)))
+            for lo in [*np.unique(values), np.inf] for hi in [*np.unique(values), np.inf] if hi >= lo
+        )  # fmt: skip
+        sizes = np.bincount(bins, minlength=3)
+        if len(np.unique(values)) > 1:
+            assert sum((c - len(values) / 3) ** 2 for c in sizes) == pytest.approx(best)
+
+
 def test_split_and_mode_constraints(graded, sample_run: Path) -> None:
     run, rows = graded
     assert len(rows) == 50
     counts = {d: sum(r["difficulty"] == d for r in rows) for d in ("hard", "medium", "easy")}
     assert counts == {"hard": 10, "medium": 20, "easy": 20}
+    summary = json.loads(RunFolder(run).grading_summary.read_text())
+    for factor, name in zip(FACTORS, BINS, strict=True):  # the summary reports each factor's binning
+        occupancy = np.bincount([r[name] for r in rows], minlength=3).tolist()
+        assert summary["bins"][factor] == {"occupancy": occupancy, "distinct": len({r[factor] for r in rows})}
     cfg = SongConfig().grading
     for scene in {r["scene_id"] for r in rows}:
         tracks = read_crowd(sample_run / "scenes" / scene)

@@ -1,0 +1,153 @@
+"""SONG's crowds against real pedestrians: the statistics of song.pipeline.crowd.realism, one method for both.
+
+    .venv/bin/python benchmarks/crowd_realism.py [--generated 30] [--avoidance orca social_force]
+        [--speed-profile paper human] [--markdown]
+
+Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 ProcTHOR houses) and
+``--generated`` more procedural scenes, for every avoidance model × speed profile asked for, and
+computes on the same footing the real ETH and Hotel sequences (EWAP obsmat files in ../shared; skipped
+with a reason when absent). Also per configuration: the closest centre distance at any frame (walking
+or standing, against 2r), the share of intents that arrive, the walking share among present
+pedestrians per second between 5 s and 55 s (mean over scenes; the minimum second), and the crowd
+stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import ROOT, emit  # noqa: E402
+
+from song.config import SongConfig  # noqa: E402
+from song.datasets.run import read_crowd  # noqa: E402
+from song.datasets.scenes.generate import VENUE_ORDER, generate_scene  # noqa: E402
+from song.pipeline.chain import iter_run  # noqa: E402
+from song.pipeline.crowd.realism import Track, crowd_statistics, read_obsmat  # noqa: E402
+
+REAL = ROOT.parent / "shared" / "reference" / "pedestrians"
+SAMPLES = ROOT / "datasets" / "sample_scenes"
+
+
+def _walking_share(tracks: list[Track]) -> np.ndarray:
+    """(56,) share of present pedestrians walking (> 0.2 m/s) at each second 0..55 (NaN when nobody)."""
+    out = np.full(56, np.nan)
+    if not tracks:
+        return out
+    for second in range(56):
+        walking = []
+        for tr in tracks:
+            k = np.searchsorted(tr.t, second)
+            if 0 < k < len(tr.t):
+                v = np.hypot(*(tr.xy[k] - tr.xy[k - 1])) / (tr.t[k] - tr.t[k - 1])
+                walking.append(v > 0.2)
+        if walking:
+            out[second] = np.mean(walking)
+    return out
+
+
+def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
+    config = SongConfig(seed=1, crowd={"avoidance": avoidance}, intents={"speed_profile": profile})
+    run = work / f"{avoidance}-{profile}"
+    results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
+    seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
+    tracks, closest, shares, arrived, total = [], np.inf, [], 0, 0
+    r = config.crowd.agent_radius_m
+    for scene in sorted((run / "scenes").iterdir()):
+        crowd = read_crowd(scene)
+        status = json.loads((scene / "crowd_status.json").read_text())
+        arrived += sum(v["status"] == "arrived" for v in status.values())
+        total += len(status)
+        if len(crowd.ids) == 0:
+            continue
+        scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
+        tracks.append(scene_tracks)
+        shares.append(_walking_share(scene_tracks))
+        if len(crowd.ids) > 1:
+            d = np.hypot(*(crowd.xy[:, None] - crowd.xy[None]).transpose(3, 0, 1, 2))
+            d[np.arange(len(d)), np.arange(len(d))] = np.inf
+            closest = min(closest, float(d.min()))
+    share = np.nanmean(np.stack(shares), axis=0)[5:56] if shares else np.zeros(0)
+    stats = crowd_statistics(tracks)
+    stats.update(
+        {
+            "closest_any_frame_m": round(closest, 4),
+            "contact_limit_m": round(2 * r - 0.01, 3),
+            "arrived_share": round(arrived / max(total, 1), 4),
+            "walking_share_5_55_mean": round(float(np.mean(share)), 4) if len(share) else None,
+            "walking_share_5_55_min": round(float(np.min(share)), 4) if len(share) else None,
+            "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
+            "scenes": len(results),
+            "failed_scenes": [x.scene_id for x in results if x.status != "ok"],
+        }
+    )
+    return stats
+
+
+def markdown(rows: dict[str, dict]) -> str:
+    cols = [
+        ("head-on p25, m", lambda s: s["passes"]["head_on"]["p25"]),
+        ("head-on < 0.6 m", lambda s: s["passes"]["head_on"]["below_0.6"]),
+        ("crossing < 0.5 m", lambda s: s["passes"]["crossing"]["below_0.5"]),
+        ("pairs < 2 m passing < 0.6 m", lambda s: s["passes"]["all"]["below_0.6"]),
+        ("speed median (p95), m/s", lambda s: f"{s['speed_median_mps']} ({s['speed_p95_mps']})"),
+        ("standing share", lambda s: s["standing_share"]),
+        ("tortuosity", lambda s: s["tortuosity_median"]),
+        ("accel RMS, m/s²", lambda s: s["acceleration_rms_mps2"]),
+    ]
+    lines = ["| set | " + " | ".join(c for c, _ in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for name, stats in rows.items():
+        cells = []
+        for _, get in cols:
+            try:
+                cells.append(str(get(stats)))
+            except (KeyError, TypeError):
+                cells.append("–")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--generated", type=int, default=30)
+    parser.add_argument("--avoidance", nargs="+", default=["orca", "social_force"])
+    parser.add_argument("--speed-profile", nargs="+", default=["paper", "human"])
+    parser.add_argument("--markdown", action="store_true")
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="song-crowd-realism-"))
+    rows: dict[str, dict] = {}
+    try:
+        scenes = work / "scenes"
+        shutil.copytree(SAMPLES, scenes, ignore=shutil.ignore_patterns("*.md", "*.txt"))
+        if args.generated:
+            for k in range(args.generated):  # ids distinct from the sample scenes'
+                venue = VENUE_ORDER[k % len(VENUE_ORDER)]
+                generate_scene(f"gen_{venue}_{k:04d}", venue, 1234, scenes, splat=False)
+        for avoidance in args.avoidance:
+            for profile in args.speed_profile:
+                start = time.perf_counter()
+                stats = run_config(scenes, avoidance, profile, work)
+                stats["wall_s"] = round(time.perf_counter() - start, 1)
+                rows[f"SONG {avoidance} / {profile}"] = stats
+        for name in ("eth", "hotel"):
+            path = REAL / f"ewap_seq_{name}_obsmat.txt"
+            rows[f"real {name.upper()}"] = (
+                crowd_statistics(read_obsmat(path)) if path.is_file() else {"skipped": f"{path} is absent"}
+            )
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    emit(rows)
+    if args.markdown:
+        print(markdown({k: v for k, v in rows.items() if "skipped" not in v}))  # noqa: T201
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,114 @@
+"""Personal space (issue 25): comfort distance in open space, body distance in a narrow corridor, no contact
+with someone who has stopped, and routines whose stops are free and reachable."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.config import SongConfig
+from song.datasets.run.intents import Intent, Leg, Provenance
+from song.datasets.scenes import Region, SemanticMap, load_scene_package, write_scene_package
+from song.datasets.scenes.model import OccupancySpec
+from song.pipeline.crowd.avoidance import make_avoidance
+from song.pipeline.crowd.navmesh import scene_navmesh
+from song.pipeline.crowd.simulate import plan_crowd
+from song.util import derive_rng
+
+CFG = SongConfig().crowd
+R = CFG.agent_radius_m
+RES = 0.05
+
+
+def room(root: Path, width: float, height: float, scene_id: str) -> Path:
+    """An empty walled rectangle (walls 0.1 m thick) whose free interior is ``width`` × ``height`` m."""
+    wall = round(0.1 / RES)
+    cols, rows = round(width / RES) + 2 * wall, round(height / RES) + 2 * wall
+    cells = np.full((rows, cols), 255, dtype=np.uint8)
+    cells[:wall], cells[-wall:], cells[:, :wall], cells[:, -wall:] = 0, 0, 0, 0
+    w, h = cols * RES, rows * RES
+    smap = SemanticMap(
+        scene_id=scene_id,
+        venue_type="office",
+        source="procedural",
+        bounds=(0.0, 0.0, w, h),
+        occupancy=OccupancySpec(resolution=RES, origin=(0.0, 0.0)),
+        regions=[Region(id="hall", type="lobby", polygon=[(0, 0), (w, 0), (w, h), (0, h)])],
+        objects=[],
+    )
+    return write_scene_package(root / scene_id, smap, cells)
+
+
+def walker(k: int, start, goal, speed: float = 0.9, depart: float = 0.0, legs: list[Leg] | None = None) -> Intent:
+    return Intent(
+        id=k,
+        activity="walk",
+        start_object="a",
+        goal_object="b",
+        start_xy=start,
+        goal_xy=goal,
+        speed=speed,
+        depart_time=depart,
+        provenance=Provenance(provider="offline", model="test"),
+        legs=legs or [],
+    )
+
+
+def simulate(scene: Path, intents: list[Intent], avoidance: str = "orca"):
+    cfg = CFG.model_copy(update={"avoidance": avoidance})
+    mesh = scene_navmesh(load_scene_package(scene), R, cfg.contour_error_m)
+    plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "pair", "crowd"))
+    return plan, mesh
+
+
+def closest(plan) -> float:
+    d = np.linalg.norm(plan.xy[:, None] - plan.xy[None], axis=-1)
+    d[np.arange(len(d)), np.arange(len(d))] = np.inf
+    return float(d.min())
+
+
+OFFSET = 0.05  # m: lateral offset of a head-on pair (an exactly symmetric pair is broken by the start jitter)
+
+
+@pytest.mark.parametrize(
+    ("name", "a", "b"),
+    [
+        ("head-on", ((1.0, 4.0), (11.0, 4.0 + OFFSET)), ((11.0, 4.0), (1.0, 4.0 - OFFSET))),
+        ("crossing", ((1.0, 4.0), (11.0, 4.0)), ((6.0, 0.8), (6.0, 7.2))),
+    ],
+)
+def test_open_space_pairs_keep_the_comfort_distance(tmp_path: Path, name: str, a, b) -> None:
+    scene = room(tmp_path, 12.0, 8.0, "hall")
+    intents = [walker(0, *a), walker(1, *b, depart=0.5 if name == "crossing" else 0.0)]
+    plan, mesh = simulate(scene, intents)
+    assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
+    assert closest(plan) >= CFG.comfort_distance_m - 0.05, (name, closest(plan))
+    assert mesh.contains(plan.xy.reshape(-1, 2), tol=1e-6).all()
+
+
+def test_narrow_corridor_pair_passes_at_body_distance(tmp_path: Path) -> None:
+    """In a corridor too narrow for comfort the pair still passes, shoulder to shoulder but never in contact."""
+    scene = room(tmp_path, 10.0, 1.2, "corridor")
+    intents = [walker(0, (0.6, 0.7), (9.6, 0.7)), walker(1, (9.6, 0.7), (0.6, 0.7), depart=0.3)]
+    plan, _ = simulate(scene, intents)
+    assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
+    assert closest(plan) >= 2 * R - 0.01
+
+
+def test_no_contact_with_a_pedestrian_stopped_mid_route(tmp_path: Path) -> None:
+    """A walker heading straight through someone dwelling at a stop goes round it, never closer than 2r."""
+    scene = room(tmp_path, 12.0, 8.0, "hall")
+    stop = Leg(activity="wait", goal_object="b", goal_xy=(6.0, 4.0), geodesic_m=5.0, dwell_s=20.0)
+    last = Leg(activity="walk", goal_object="c", goal_xy=(6.0, 7.0), geodesic_m=3.0, dwell_s=0.0)
+    intents = [
+        walker(0, (1.0, 4.0), (6.0, 4.0), legs=[stop, last]),  # stands at (6, 4) from ~6 s to ~26 s
+        walker(1, (1.0, 5.0), (11.0, 3.0), depart=8.0),  # its straight line runs through the stop
+    ]
+    plan, _ = simulate(scene, intents)
+    assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
+    assert closest(plan) >= 2 * R - 0.01
+    k = list(plan.ped_ids).index(0)
+    at_stop = np.linalg.norm(plan.xy[k] - np.array([6.0, 4.0]), axis=-1) < 0.1
+    assert at_stop.sum() / plan.fps >= 19.0  # it really dwelt there
