@@ -7,6 +7,8 @@ independent; :data:`COMMAND_MODULES` lists them.
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 
 import typer
 
@@ -17,6 +19,36 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+def _check_environment() -> None:
+    """Refuse, in one line, environment values that would crash a library import with a traceback."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch is not None and not epoch.strip().isdigit():
+        sys.stderr.write(
+            f"error: SOURCE_DATE_EPOCH={epoch!r} is not a whole number of seconds since 1970-01-01 (fix or unset it)\n"
+        )
+        raise SystemExit(2)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from song import __version__
+
+        typer.echo(f"song {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="print the version and exit"
+    ),
+) -> None:
+    """SONG: build social-navigation benchmarks from indoor scenes."""
+
+
+_check_environment()  # before the command modules import numpy and friends
 
 COMMAND_MODULES = (
     "song.cli.scenes",

@@ -31,7 +31,10 @@ WorkersOption = typer.Option(0, "--workers", "-j", min=0, help="worker processes
 
 
 def handle_errors(func: F) -> F:
-    """Turn a :class:`SongError` into a one-line message on stderr and exit code 2."""
+    """Turn a :class:`SongError` or a file-system error into a one-line message on stderr and exit code 2.
+
+    File-system errors: a read-only or full disk, a file where a folder is expected, a missing path.
+    """
 
     @wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -39,6 +42,10 @@ def handle_errors(func: F) -> F:
             return func(*args, **kwargs)
         except SongError as exc:
             err_console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
+            raise typer.Exit(2) from None
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename else ""
+            err_console.print(f"[red]error:[/red] {where}{exc.strerror or exc}", soft_wrap=True)
             raise typer.Exit(2) from None
 
     return wrapper  # type: ignore[return-value]

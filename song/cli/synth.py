@@ -23,6 +23,7 @@ from song.cli.common import (
 )
 from song.config import SongConfig
 from song.datasets.scenes import find_scene_packages
+from song.errors import SongError
 from song.parallel import default_workers
 from song.pipeline.chain import RunSummary, SceneResult, iter_run, load_stages, summarize_run
 
@@ -118,6 +119,12 @@ def synth(
     """Run every registered per-scene stage on every scene package (resumable, parallel)."""
     cfg = make_config(config, seed, sets)
     names = [name.strip() for name in stages.split(",")] if stages else None
+    if out.exists() and not out.is_dir():
+        raise SongError(f"--out {out} is a file: give a folder for the run")
+    known = [stage.name for stage in load_stages()]
+    for name in names or []:
+        if name not in known:
+            raise SongError(f"unknown stage '{name}' in --stages: use any of {', '.join(known)}")
     results = run_chain_command(scenes, out, cfg, names, workers or default_workers(), executor, scheduler, quiet)
     if any(r.status == "failed" for r in results):
         raise typer.Exit(1)

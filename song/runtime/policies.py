@@ -15,6 +15,8 @@ never from constants here. A user's policy loads with ``--policy module:Class``.
 from __future__ import annotations
 
 import importlib
+import importlib.util
+from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -218,16 +220,40 @@ def _depth_policy() -> Policy:
 BASELINES = {"straight": StraightPolicy, "astar": AStarPolicy, "social": SocialPolicy, "depth": _depth_policy}
 
 
+def _policy_module(spec: str):
+    """Import ``spec``: a dotted module name, or a ``.py`` file (loaded under its stem)."""
+    if not spec.endswith(".py"):
+        return importlib.import_module(spec)
+    path = Path(spec).expanduser()
+    if not path.is_file():
+        raise OSError(f"{path}: no such policy file")
+    module_spec = importlib.util.spec_from_file_location(f"song_user_policy_{path.stem}", path)
+    module = importlib.util.module_from_spec(module_spec)
+    module_spec.loader.exec_module(module)
+    return module
+
+
 def load_policy(name: str) -> Policy:
-    """A baseline by name, or ``module:Class`` for a user's policy (instantiated without arguments)."""
+    """A baseline by name, or ``module:Class`` / ``path/to/file.py:Class`` for a user's policy (no arguments)."""
     if name in BASELINES:
         return BASELINES[name]()
     if ":" not in name:
-        raise SongError(f"unknown policy '{name}': use one of {', '.join(BASELINES)} or module:Class")
-    module_name, _, attr = name.partition(":")
+        raise SongError(
+            f"unknown policy '{name}': use one of {', '.join(BASELINES)}, module:Class or path/to/file.py:Class"
+        )
+    module_name, _, attr = name.rpartition(":")
     try:
-        policy = getattr(importlib.import_module(module_name), attr)()
-    except (ImportError, AttributeError) as exc:
+        module = _policy_module(module_name)
+    except ModuleNotFoundError as exc:
+        raise SongError(
+            f"cannot load policy '{name}': no module named '{exc.name}' (add its folder to PYTHONPATH, "
+            "or give the file: path/to/file.py:Class)"
+        ) from exc
+    except (ImportError, OSError) as exc:
+        raise SongError(f"cannot load policy '{name}': {exc}") from exc
+    try:
+        policy = getattr(module, attr)()
+    except AttributeError as exc:
         raise SongError(f"cannot load policy '{name}': {exc}") from exc
     if not (callable(getattr(policy, "reset", None)) and callable(getattr(policy, "act", None))):
         raise SongError(f"policy '{name}' must define reset(episode) and act(observation)")

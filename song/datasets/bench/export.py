@@ -104,6 +104,9 @@ def _episode_table(run: RunFolder, config_sha: str, goal_radius: float) -> pa.Ta
         "n_pedestrians": [len(ids) for ids in src["pedestrian_ids"]],
         "pedestrian_ids": src["pedestrian_ids"],
         "config_sha256": [config_sha] * n,
+        # manifests graded before these were recorded: no reference pedestrian, no predicted encounter
+        "reference_ped_id": src.get("reference_ped", [-1] * n),
+        "encounter_time": src.get("encounter_time", [None] * n),
     }
     return pa.table(columns).cast(EPISODES).sort_by("episode_id")
 
@@ -182,6 +185,8 @@ def _git_commit() -> str:
 
 def _created() -> str:
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch is not None and not epoch.strip().isdigit():
+        raise SongError(f"SOURCE_DATE_EPOCH={epoch!r} is not a whole number of seconds since 1970-01-01")
     moment = dt.datetime.fromtimestamp(int(epoch), dt.UTC) if epoch else dt.datetime.now(dt.UTC)
     return moment.replace(microsecond=0).isoformat().replace("+00:00", "Z")
 

@@ -19,6 +19,7 @@ from song.datasets.bench.info import Info, check_schema_version, read_info, runt
 from song.datasets.bench.release import resolve_version
 from song.datasets.bench.schema import (
     AVATARS_PATH,
+    DIFFICULTIES,
     EPISODES_PATH,
     INFO_PATH,
     META_SCHEMA_VERSION,
@@ -154,6 +155,8 @@ class Benchmark:
     def episodes(self, difficulty: str | None = None, scene: str | None = None) -> Iterator[Episode]:
         """Typed episodes in episode-id order, optionally filtered by difficulty and scene."""
         table = self.episodes_table
+        if difficulty is not None and difficulty not in DIFFICULTIES:
+            raise BenchmarkError(f"unknown difficulty '{difficulty}': use one of {', '.join(DIFFICULTIES)}")
         if difficulty is not None:
             table = table.filter(pc.equal(table.column("difficulty"), difficulty))
         if scene is not None:
@@ -192,6 +195,8 @@ class Benchmark:
             factors=factors,
             params=self.params,
             gaussians_path=self.blob(self._scenes[scene_id]["gaussians"]),
+            reference_ped_id=int(row.get("reference_ped_id", -1)),
+            encounter_time=float("nan") if row.get("encounter_time") is None else float(row["encounter_time"]),
         )
 
 

@@ -11,7 +11,8 @@ import pyarrow as pa
 from song.datasets.run.crowd import CROWD_COLUMNS
 
 SCHEMA_VERSION = "1.3.0"  # 1.1: info.json records the pedestrian body radius; 1.2: the fingerprint covers info.json;
-# 1.3: info.json records how the crowd was made (avoidance model, speed profile, personal space, scenario length)
+# 1.3: info.json records how the crowd was made (avoidance model, speed profile, personal space, scenario length),
+# episodes record their reference pedestrian and the predicted encounter time
 INFO_FINGERPRINT_SINCE = (1, 2, 0)  # releases of this schema or later fingerprint their info.json too
 FORMAT_NAME = "song.bench"
 PARQUET_COMPRESSION = "zstd"
@@ -70,6 +71,8 @@ EPISODES = pa.schema(
         ("n_pedestrians", pa.int32()),
         ("pedestrian_ids", pa.list_(pa.int32())),
         ("config_sha256", pa.string()),
+        ("reference_ped_id", pa.int32()),  # schema ≥ 1.3: the pedestrian the mode is about (-1: random)
+        ("encounter_time", pa.float64()),  # schema ≥ 1.3: predicted time of the closest pass with it, s (null: none)
     ]
 )
 

@@ -123,6 +123,11 @@ class Episode:
         avatars: avatar bindings, one per pedestrian that has one.
         params: the runtime parameters the episode is run with (the release's, unless overridden).
         gaussians_path: the scene's Gaussian PLY inside the release, or None when it has none.
+        reference_ped_id: the pedestrian the sampling mode is about (co/counter-directional: the one
+            whose walk the robot follows or meets; encounter: the walking one passed within 1 m); -1
+            for random episodes and releases before schema 1.3.
+        encounter_time: predicted scenario time of the robot's closest pass with that pedestrian at
+            its nominal speed along ``path``, s (NaN when there is none).
     """
 
     episode_id: str
@@ -144,6 +149,8 @@ class Episode:
     factors: dict[str, float] = field(default_factory=dict)
     params: RuntimeParams = field(default_factory=RuntimeParams)
     gaussians_path: Path | None = None
+    reference_ped_id: int = -1
+    encounter_time: float = float("nan")
 
 
 def pedestrian_states(tracks: list[PedestrianTrack], t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -148,6 +148,8 @@ def _scene_episodes(scene_id: str, scenes_dir: Path, run_dir: Path, config: Song
                 "n_encounters": int(np.count_nonzero(passes <= cfg.encounter_radius_m)),
                 "corridor_width": round(corridor_width(path, robot, cfg.width_sample_m), 4),
                 "min_pass_m": round(float(passes.min()), 4),
+                "reference_ped": draw["reference_ped"],
+                "encounter_time": draw["encounter_time"],
                 "pedestrian_ids": tracks.ids.astype(int).tolist(),
             }
         )

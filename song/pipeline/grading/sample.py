@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,6 +72,20 @@ class Crowd:
         frames = np.clip(np.round(np.asarray(t) * self.fps).astype(np.int64), 0, self.xy.shape[1] - 1)
         return np.transpose(self.xy[:, frames], (1, 0, 2))
 
+    @functools.cached_property
+    def walking(self) -> np.ndarray:
+        """(P, F) bool: the pedestrian moves faster than ``WALKING_MPS`` at that frame."""
+        if self.xy.shape[1] < 2:
+            return np.zeros(self.xy.shape[:2], dtype=bool)
+        speed = np.linalg.norm(np.diff(self.xy, axis=1), axis=-1) * self.fps
+        return np.concatenate([speed[:, :1], speed], axis=1) > WALKING_MPS
+
+    def walks(self, p: int) -> list[tuple[int, int]]:
+        """Pedestrian p's walks: (first, last) frames of each walking stretch of at least ``MIN_WALK_S``."""
+        edges = np.diff(np.concatenate([[0], self.walking[p].astype(np.int8), [0]]))
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+        return [(int(a), int(b)) for a, b in zip(starts, ends, strict=True) if (b - a) / self.fps >= MIN_WALK_S]
+
     def circle(self) -> tuple[np.ndarray, float]:
         """Centre (2,) and radius (m) of the circle bounding every trajectory sample."""
         pts = self.xy.reshape(-1, 2)
@@ -89,11 +104,23 @@ def robot_positions(path: np.ndarray, speed: float, dt: float) -> np.ndarray:
     return np.column_stack([np.interp(s, arc, path[:, 0]), np.interp(s, arc, path[:, 1])])
 
 
+def pass_distances(path: np.ndarray, crowd: Crowd, t0: float, speed: float, walking_only: bool = False):
+    """(K, P) horizontal distances between the robot moving along ``path`` from ``t0`` and each pedestrian.
+
+    With ``walking_only``, distances to a pedestrian at frames where it is not walking are infinite.
+    """
+    robot = robot_positions(path, speed, 1.0 / crowd.fps)
+    t = t0 + np.arange(len(robot)) / crowd.fps
+    d = np.linalg.norm(crowd.at(t) - robot[:, None, :], axis=-1)
+    if walking_only:
+        frames = np.clip(np.round(t * crowd.fps).astype(np.int64), 0, crowd.xy.shape[1] - 1)
+        d = np.where(crowd.walking[:, frames].T, d, np.inf)
+    return d
+
+
 def closest_pass(path: np.ndarray, crowd: Crowd, t0: float, speed: float) -> np.ndarray:
     """Per pedestrian, the closest horizontal distance to the robot moving along ``path`` from ``t0``."""
-    robot = robot_positions(path, speed, 1.0 / crowd.fps)
-    peds = crowd.at(t0 + np.arange(len(robot)) / crowd.fps)
-    return np.linalg.norm(peds - robot[:, None, :], axis=-1).min(axis=0)
+    return pass_distances(path, crowd, t0, speed).min(axis=0)
 
 
 def subtended_deg(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> float:
@@ -101,6 +128,11 @@ def subtended_deg(a: np.ndarray, b: np.ndarray, centre: np.ndarray) -> float:
     u, v = a - centre, b - centre
     cos = float(u @ v / max(np.linalg.norm(u) * np.linalg.norm(v), 1e-12))
     return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+WALKING_MPS = 0.2  # a pedestrian faster than this is walking (as in benchmarks/crowd_realism.py)
+MIN_WALK_S = 2.0  # co/counter-directional episodes follow a walk of at least this long
+WALK_SHARE = 0.5  # ... during which the reference pedestrian walks for this share of the shorter of both
 
 
 class EpisodeSampler:
@@ -120,14 +152,32 @@ class EpisodeSampler:
         latest = max(0.0, self.duration - length / self.cfg.robot_speed_mps)
         return round(float(rng.uniform(0.0, latest)), 3)
 
+    def _t0_during(self, rng: np.random.Generator, length: float, walk: tuple[int, int]) -> float | None:
+        """A t0 at which the reference pedestrian walks during the robot's nominal traversal.
+
+        It walks for at least ``WALK_SHARE`` of the shorter of its walk and the traversal; None when no
+        such t0 fits in the scenario.
+        """
+        run = length / self.cfg.robot_speed_mps
+        ts, te = walk[0] / self.crowd.fps, walk[1] / self.crowd.fps
+        need = WALK_SHARE * min(run, te - ts)
+        lo, hi = max(0.0, ts - run + need), min(max(0.0, self.duration - run), te - need)
+        return round(float(rng.uniform(lo, hi)), 3) if hi >= lo else None
+
     def draw(self, mode: str, rng: np.random.Generator) -> tuple[dict | None, str]:
         """One episode of ``mode`` or (None, reason) after ``max_tries`` attempts."""
         cfg = self.cfg
         reason = "no candidate"
         for _ in range(cfg.max_tries):
+            walk, ref = None, -1
             if mode in ("co_directional", "counter_directional"):
-                p = int(rng.integers(len(self.crowd.ids)))
-                a, b = self.crowd.xy[p, 0], self.crowd.xy[p, -1]
+                ref = int(rng.integers(len(self.crowd.ids)))
+                walks = self.crowd.walks(ref)
+                if not walks:
+                    reason = "the pedestrian never walks"
+                    continue
+                walk = walks[int(rng.integers(len(walks)))]
+                a, b = self.crowd.xy[ref, walk[0]], self.crowd.xy[ref, walk[1]]
                 if mode == "counter_directional":
                     a, b = b, a
                 start, goal = self._near(a, cfg.near_ped_m, rng), self._near(b, cfg.near_ped_m, rng)
@@ -154,15 +204,27 @@ class EpisodeSampler:
             if not cfg.min_path_m <= length <= cfg.max_path_m:
                 reason = f"path length {length:.1f} m outside [{cfg.min_path_m}, {cfg.max_path_m}]"
                 continue
-            t0 = self._t0(rng, length)
+            t0 = self._t0(rng, length) if walk is None else self._t0_during(rng, length, walk)
+            if t0 is None:
+                reason = "the pedestrian's walk and the robot's traversal do not fit in the scenario together"
+                continue
             if np.linalg.norm(self.crowd.at(np.array([t0]))[0] - start, axis=1).min() < cfg.start_clearance_m:
                 reason = "a pedestrian stands at the start at t0"
                 continue
-            if (
-                mode == "encounter"
-                and closest_pass(path, self.crowd, t0, cfg.robot_speed_mps).min() > cfg.encounter_pass_m
-            ):
-                reason = "robot never passes within 1 m of a pedestrian"
-                continue
-            return {"start": start, "goal": goal, "path": path, "length": length, "t0": t0}, ""
+            d = pass_distances(path, self.crowd, t0, cfg.robot_speed_mps, walking_only=mode == "encounter")
+            if mode == "encounter":
+                ref = int(np.argmin(d.min(axis=0)))
+                if d[:, ref].min() > cfg.encounter_pass_m:
+                    reason = "robot never passes within 1 m of a walking pedestrian"
+                    continue
+            meet = round(t0 + int(np.argmin(d[:, ref])) / self.crowd.fps, 3) if ref >= 0 else None
+            return {
+                "start": start,
+                "goal": goal,
+                "path": path,
+                "length": length,
+                "t0": t0,
+                "reference_ped": int(self.crowd.ids[ref]) if ref >= 0 else -1,
+                "encounter_time": meet,
+            }, ""
         return None, reason

@@ -84,6 +84,8 @@ def build_graded_run(root: Path, n_scenes: int = 2, episodes_per_scene: int = 5,
                     "score": 4 * (e % 3),
                     "difficulty": DIFFICULTY[e % 5],
                     "pedestrian_ids": list(range(2 + k)),
+                    "reference_ped": -1 if e % 4 == 3 else 0,
+                    "encounter_time": None if e % 4 == 3 else 0.5 * e + 2.0,
                 }
             )
     (run / "manifest").mkdir()

@@ -15,7 +15,7 @@ from song.datasets.run import RunFolder, read_crowd
 from song.datasets.scenes import load_scene_package
 from song.pipeline.grading import count_turns, grade_run, split_difficulty, tercile_bins
 from song.pipeline.grading.grade import BINS, FACTORS
-from song.pipeline.grading.sample import Crowd, RobotMap, closest_pass, subtended_deg
+from song.pipeline.grading.sample import Crowd, RobotMap, closest_pass, pass_distances, subtended_deg
 from tests.conftest import SAMPLES
 
 
@@ -97,15 +97,13 @@ def test_split_and_mode_constraints(graded, sample_run: Path) -> None:
             assert cfg.min_path_m <= r["geodesic_distance"] <= cfg.max_path_m
             rc = robot.package.occupancy.to_cell(path)
             assert robot.legal[rc[:, 0], rc[:, 1]].all()
-            ends = tracks.xy[:, [0, -1]]
-            if r["mode"] == "co_directional":
+            if r["mode"] in ("co_directional", "counter_directional"):  # near the ends of one of its walks
+                k = list(tracks.ids).index(r["reference_ped"])
+                ends = [tracks.xy[k, [a, b]] for a, b in crowd.walks(k)]
+                if r["mode"] == "counter_directional":
+                    ends = [e[::-1] for e in ends]
                 assert any(
                     np.linalg.norm(e[0] - start) <= 2.0 + 1e-6 and np.linalg.norm(e[1] - goal) <= 2.0 + 1e-6
-                    for e in ends
-                )
-            elif r["mode"] == "counter_directional":
-                assert any(
-                    np.linalg.norm(e[1] - start) <= 2.0 + 1e-6 and np.linalg.norm(e[0] - goal) <= 2.0 + 1e-6
                     for e in ends
                 )
             else:
@@ -138,3 +136,31 @@ def test_same_seed_identical_manifest(graded, tmp_path: Path) -> None:
     (again / "manifest/episodes.parquet").unlink()
     grade_run(again, n_episodes=50, workers=2)  # the worker count must not change the bytes
     assert (again / "manifest/episodes.parquet").read_bytes() == (run / "manifest/episodes.parquet").read_bytes()
+
+
+def test_modes_deliver_their_interaction(graded, sample_run: Path) -> None:
+    """Co/counter-directional: the reference pedestrian walks during the robot's nominal traversal;
+    encounter: the ≤ 1 m pass is with a pedestrian walking at that moment; random: no reference."""
+    _, rows = graded
+    cfg = SongConfig().grading
+    checked = 0
+    for row in rows:
+        tracks = read_crowd(sample_run / "scenes" / row["scene_id"])
+        crowd = Crowd(tracks.ids, tracks.xy, tracks.fps)
+        if row["mode"] == "random":
+            assert row["reference_ped"] == -1 and row["encounter_time"] is None
+            continue
+        k = list(tracks.ids).index(row["reference_ped"])
+        frames = np.arange(round(row["t0"] * crowd.fps), round((row["t0"] + row["optimal_time"]) * crowd.fps))
+        frames = frames[frames < crowd.xy.shape[1]]
+        walking_s = crowd.walking[k, frames].sum() / crowd.fps
+        path = np.asarray(row["path"])
+        if row["mode"] == "encounter":
+            d = pass_distances(path, crowd, row["t0"], cfg.robot_speed_mps, walking_only=True)[:, k]
+            assert d.min() <= cfg.encounter_pass_m  # the close pass is with someone walking
+        else:
+            assert walking_s >= 1.0, row  # the reference pedestrian walks while the robot runs
+        run_end = row["t0"] + row["optimal_time"] + 1.0 / crowd.fps
+        assert row["t0"] <= row["encounter_time"] <= run_end + 1e-6
+        checked += 1
+    assert checked >= len(rows) // 2

@@ -1,0 +1,88 @@
+"""One-line errors, never a traceback, for a newcomer's typical mistakes (issue 21), and the policy loader."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from song import __version__
+from song.cli import app
+from song.errors import SongError
+from song.runtime.policies import load_policy
+from tests.conftest import SAMPLES
+
+GOLDEN = Path(__file__).resolve().parents[1] / "artifacts" / "bench_golden"
+
+
+def _invoke(args: list[str]) -> tuple[int, str]:
+    result = CliRunner().invoke(app, args)
+    assert "Traceback" not in result.output, result.output
+    return result.exit_code, result.output
+
+
+def test_version() -> None:
+    code, out = _invoke(["--version"])
+    assert code == 0 and out.strip() == f"song {__version__}"
+
+
+def test_bad_source_date_epoch_is_one_line() -> None:
+    env = {"SOURCE_DATE_EPOCH": "abc", "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-m", "song", "--help"], env=env, capture_output=True, text=True)
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines() == [
+        "error: SOURCE_DATE_EPOCH='abc' is not a whole number of seconds since 1970-01-01 (fix or unset it)"
+    ]
+
+
+def test_out_is_a_file_and_unknown_stage(tmp_path: Path) -> None:
+    target = tmp_path / "afile"
+    target.write_text("keep me")
+    code, out = _invoke(["synth", "--scenes", str(SAMPLES), "--out", str(target)])
+    assert code == 2 and "is a file" in out and target.read_text() == "keep me"
+    code, out = _invoke(["synth", "--scenes", str(SAMPLES), "--out", str(tmp_path / "run"), "--stages", "bogus"])
+    assert code == 2 and "unknown stage 'bogus'" in out
+    assert not (tmp_path / "run").exists()  # refused before anything was written
+
+
+def test_unknown_difficulty() -> None:
+    code, out = _invoke(["eval", "--bench", str(GOLDEN), "--policy", "straight", "--difficulty", "hrad"])
+    assert code == 2 and "unknown difficulty 'hrad'" in out
+
+
+def test_full_or_read_only_disk_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    import song.cli.synth
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "run" / "run.json"))
+
+    monkeypatch.setattr(song.cli.synth, "run_chain_command", full)
+    code, out = _invoke(["synth", "--scenes", str(SAMPLES), "--out", str(tmp_path / "run")])
+    assert code == 2 and out.strip() == f"error: {tmp_path / 'run' / 'run.json'}: No space left on device"
+
+
+POLICY = """
+class Forward:
+    def reset(self, episode):
+        pass
+
+    def act(self, observation):
+        return (0.5, 0.0)
+"""
+
+
+def test_policy_from_a_file_and_clear_errors(tmp_path: Path) -> None:
+    path = tmp_path / "my_policy.py"
+    path.write_text(POLICY)
+    assert load_policy(f"{path}:Forward").act(None) == (0.5, 0.0)
+    with pytest.raises(SongError, match="PYTHONPATH"):
+        load_policy("no_such_module_xyz:Forward")
+    with pytest.raises(SongError, match="no such policy file"):
+        load_policy(f"{tmp_path / 'absent.py'}:Forward")
+    with pytest.raises(SongError, match="has no attribute 'Backward'"):
+        load_policy(f"{path}:Backward")
