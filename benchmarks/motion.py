@@ -23,8 +23,13 @@ from _common import ROOT, emit  # noqa: E402
 from song.config import MotionConfig  # noqa: E402
 from song.pipeline.motion import ProceduralGait, read_trajectories  # noqa: E402
 from song.pipeline.motion.postprocess import postprocess  # noqa: E402
-from song.pipeline.motion.quality import motion_quality  # noqa: E402
-from song.pipeline.motion.synthetic import synthetic_trajectories  # noqa: E402
+from song.pipeline.motion.quality import (  # noqa: E402
+    CADENCE_AT_1_3_SPM,
+    NORMATIVE,
+    gait_cycle_figures,
+    motion_quality,
+)
+from song.pipeline.motion.synthetic import steady_walk, synthetic_trajectories  # noqa: E402
 from song.util import derive_seed  # noqa: E402
 
 TARGETS = {
@@ -55,10 +60,50 @@ def _measure(traj, seed: int, cfg: MotionConfig) -> tuple[dict, float, object]:
         final.t,
         traj.xy,
         traj.speed,
-        cfg.walk_ratio_m_s,
+        raw.info["walk_ratio_m_s"],
         cfg.min_cadence_spm,
     )
     return quality, cpu, final
+
+
+SWEEP_MPS = (0.6, 0.8, 1.0, 1.2, 1.4, 1.6)
+NORMATIVE_SPEEDS = (1.0, 1.4)  # the joint-angle ranges hold at these speeds (walk ratio: the whole sweep)
+
+
+def normative(cfg: MotionConfig, seeds: int = 5) -> dict:
+    """Gait-cycle figures of straight steady walks per speed (median over seeds) against normative ranges."""
+    per_speed = {}
+    for v in SWEEP_MPS:
+        rows = []
+        for seed in range(seeds):
+            raw = ProceduralGait(cfg).generate([steady_walk(v)], [""], [seed])[0]
+            final, _ = postprocess(
+                raw, steady_walk(v), cfg.smoothing_sigma_frames, cfg.contact_height_m, cfg.contact_speed_mps,
+                cfg.lock_blend_frames,
+            )  # fmt: skip
+            rows.append(gait_cycle_figures(final.local_quats, final.contacts, final.t, steady_walk(v).speed))
+        per_speed[f"{v:.1f}"] = {k: round(float(np.median([r[k] for r in rows])), 3) for k in rows[0]}
+    checks = {}
+    for key, (lo, hi) in NORMATIVE.items():
+        speeds = SWEEP_MPS[1:] if key == "walk_ratio_m_s" else NORMATIVE_SPEEDS
+        values = [per_speed[f"{v:.1f}"][key] for v in speeds]
+        checks[key] = {"range": [lo, hi], "speeds": list(speeds), "values": values,
+                       "ok": all(lo <= x <= hi for x in values)}  # fmt: skip
+    cadence = float(np.interp(1.3, SWEEP_MPS, [per_speed[f"{v:.1f}"]["cadence_spm"] for v in SWEEP_MPS]))
+    checks["cadence_at_1.3_spm"] = {"range": list(CADENCE_AT_1_3_SPM), "values": [round(cadence, 1)],
+                                    "ok": CADENCE_AT_1_3_SPM[0] <= cadence <= CADENCE_AT_1_3_SPM[1]}  # fmt: skip
+    return {"per_speed": per_speed, "checks": checks}
+
+
+def normative_table(result: dict) -> str:
+    """Markdown: each figure against its normative range."""
+    lines = ["| figure | normative | ours | ok |", "|---|---|---|---|"]
+    for key, check in result["checks"].items():
+        lo, hi = check["range"]
+        where = f" at {', '.join(str(v) for v in check.get('speeds', [1.3]))} m/s"
+        values = " / ".join(f"{v:g}" for v in check["values"])
+        lines.append(f"| {key}{where} | {lo:g}–{hi:g} | {values} | {'✓' if check['ok'] else '✗'} |")
+    return "\n".join(lines) + "\n"
 
 
 def _summary(rows: list[dict]) -> dict:
@@ -71,6 +116,31 @@ def _summary(rows: list[dict]) -> dict:
             "min": round(float(values.min()), 5),
         }
     return out
+
+
+# Approximate normative means of healthy adults at natural cadence, read from the published curves every
+# 10 % of the gait cycle (Winter 1991, Fig. 2.19; Perry & Burnfield 2010, ch. 7-8): a visual reference only.
+NORMATIVE_CYCLE_PCT = np.arange(0, 101, 10)
+NORMATIVE_KNEE_DEG = np.array([5, 18, 15, 8, 5, 10, 37, 60, 48, 20, 5])
+NORMATIVE_HIP_DEG = np.array([30, 25, 15, 5, -3, -10, -5, 12, 25, 32, 30])
+
+
+def _angle_panel(ax, motion, start: int, end: int) -> None:
+    """Our left knee and hip flexion over one cycle beside the normative means."""
+    from song.geometry.rotations import quat_to_axis_angle
+    from song.geometry.skeleton import JOINT_INDEX
+
+    aa = np.degrees(quat_to_axis_angle(motion.local_quats[start : end + 1]))
+    pct = np.linspace(0, 100, end - start + 1)
+    ax.plot(pct, aa[:, JOINT_INDEX["left_knee"], 1], color="tab:red", label="knee flexion (ours)")
+    ax.plot(pct, -aa[:, JOINT_INDEX["left_hip"], 1], color="tab:green", label="hip flexion (ours)")
+    ax.plot(NORMATIVE_CYCLE_PCT, NORMATIVE_KNEE_DEG, "o--", color="tab:red", alpha=0.5, label="knee, normative")
+    ax.plot(NORMATIVE_CYCLE_PCT, NORMATIVE_HIP_DEG, "o--", color="tab:green", alpha=0.5, label="hip, normative")
+    ax.set_xlabel("% of the gait cycle (left heel strike to left heel strike)")
+    ax.set_ylabel("degrees")
+    ax.set_title("sagittal joint angles at 1.0 m/s against normative means (Winter 1991; Perry & Burnfield 2010)")
+    ax.legend(ncol=4, fontsize=8, loc="upper left")
+    ax.grid(alpha=0.3)
 
 
 def figure(path: Path, cfg: MotionConfig) -> None:
@@ -90,7 +160,7 @@ def figure(path: Path, cfg: MotionConfig) -> None:
     frames = np.linspace(start, end, 9).round().astype(int)
     left = {1, 4, 7, 10, 13, 16, 18, 20, 22}
     right = {2, 5, 8, 11, 14, 17, 19, 21, 23}
-    fig, axes = plt.subplots(3, 1, figsize=(13, 9), gridspec_kw={"height_ratios": [2.2, 1, 1.3]})
+    fig, axes = plt.subplots(4, 1, figsize=(13, 12), gridspec_kw={"height_ratios": [2.2, 1, 1.3, 1.5]})
     for k, f in enumerate(frames):
         pose = joints[f] - np.array([joints[f, 0, 0] - 0.75 * k, joints[f, 0, 1], 0.0])
         for j in range(1, 24):
@@ -115,6 +185,7 @@ def figure(path: Path, cfg: MotionConfig) -> None:
     axes[2].set_ylabel("height (m)")
     axes[2].set_title("foot heights (shaded: detected contact)")
     axes[2].legend(ncol=5, fontsize=8, loc="upper right")
+    _angle_panel(axes[3], motion, start, end)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
@@ -125,6 +196,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="synthetic plans + one crowd scene")
     parser.add_argument("--runs", type=Path, nargs="*", default=[ROOT / "runs" / "demo"], help="run folders")
     parser.add_argument("--figure", type=Path, default=None, help="write the gait-cycle PNG here")
+    parser.add_argument("--normative", action="store_true", help="also the joint-angle sweep and its markdown table")
     args = parser.parse_args()
     cfg = MotionConfig()
     ProceduralGait(cfg).generate([synthetic_trajectories(1.0)["straight_1.0"]], [""], [0])  # warm-up
@@ -168,7 +240,11 @@ def main() -> None:
     if args.figure:
         figure(args.figure, cfg)
         result["figure"] = str(args.figure)
+    if args.normative:
+        result["normative"] = normative(cfg)
     emit(result)
+    if args.normative:
+        print(normative_table(result["normative"]))  # noqa: T201
 
 
 if __name__ == "__main__":

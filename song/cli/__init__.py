@@ -59,6 +59,7 @@ COMMAND_MODULES = (
     "song.cli.bench",
     "song.cli.eval",
     "song.cli.viz",
+    "song.cli.config",
 )
 
 for _module in COMMAND_MODULES:

@@ -88,7 +88,7 @@ def diff_command(
 @handle_errors
 def export_habitat_command(
     bench: Path = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
-    out: Path = typer.Argument(..., help="output .json.gz"),
+    out: Path = typer.Argument(..., help="output .json.gz (all episodes), or a folder: <split>/<split>.json.gz"),
     version: str | None = typer.Option(None, "--version", help="version (default: latest)"),
 ) -> None:
     """Habitat PointNav episodes (json.gz, Y-up)."""

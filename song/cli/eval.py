@@ -22,6 +22,7 @@ def eval_command(
     bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
     policy: list[str] = typer.Option(["social"], "--policy", help="straight | astar | social | depth | module:Class"),
     difficulty: str | None = typer.Option(None, "--difficulty", help="easy | medium | hard (default: all)"),
+    split: str = typer.Option("test", "--split", help="which split's episodes (train | val | test)"),
     limit: int | None = typer.Option(
         None, "--limit", min=1, help="only the first N episodes (in release order, after --difficulty)"
     ),
@@ -59,7 +60,8 @@ def eval_command(
     if resolution:
         width, height = parse_size(resolution, "--resolution")
         camera.update(width=width, height=height)
-    episodes = list(release.episodes(difficulty=difficulty)) if difficulty or limit else None
+    whole = not difficulty and not limit and release.splits() == {split}
+    episodes = None if whole else list(release.episodes(difficulty=difficulty, split=split))
     if limit is not None:
         episodes = episodes[:limit]
     total = len(episodes) if episodes is not None else len(release)

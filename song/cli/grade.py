@@ -9,6 +9,7 @@ import typer
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
 from song.pipeline.grading import grade_run
+from song.pipeline.grading.grade import parse_splits
 
 
 @app.command("grade")
@@ -17,16 +18,30 @@ def grade(
     run: Path = typer.Option(..., "--run", help="run folder made by song synth"),
     episodes: int | None = typer.Option(None, "--episodes", min=1, help="total episodes (default: config, 500)"),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes (scenes in parallel)"),
+    split: str | None = typer.Option(
+        None, "--split", help="whole scenes per split by shares, e.g. train:val:test=8:1:1 (default: all test)"
+    ),
+    train_episodes: int | None = typer.Option(None, "--train-episodes", min=1, help="episodes of the train split"),
+    val_episodes: int | None = typer.Option(None, "--val-episodes", min=1, help="episodes of the val split"),
 ) -> None:
-    """Sample robot episodes over all scenes, grade them easy/medium/hard, write RUN/manifest/."""
-    result = grade_run(run, n_episodes=episodes, workers=workers)
+    """Sample robot episodes over all scenes, grade them easy/medium/hard, write RUN/manifest/.
+
+    ``--episodes`` is the test split's count (the paper's official set: 500, graded 100/200/200).
+    """
+    extra = {k: v for k, v in (("train", train_episodes), ("val", val_episodes)) if v}
+    splits = parse_splits(split) if split else None
+    result = grade_run(run, n_episodes=episodes, workers=workers, splits=splits, split_episodes=extra)
     rows = [{"difficulty": d, **{m: str(c) for m, c in modes.items()}} for d, modes in result.summary["counts"].items()]
     modes = list(next(iter(result.summary["counts"].values())).keys())
     console.print(
         status_table(f"{result.summary['episodes']} episodes in {run}/manifest", rows, ["difficulty", *modes])
     )
-    for factor, report in result.summary["bins"].items():
-        occupancy = " / ".join(str(c) for c in report["occupancy"])
-        console.print(f"{factor}: bins {occupancy} (easy→hard), {report['distinct']} distinct values")
+    bins = result.summary["bins"]
+    for name, reports in bins.items() if "path_length" not in bins else [("test", bins)]:
+        for factor, report in reports.items():
+            occupancy = " / ".join(str(c) for c in report["occupancy"])
+            console.print(f"{name} {factor}: bins {occupancy} (easy→hard), {report['distinct']} distinct values")
+    for name, info in result.summary["splits"].items():
+        console.print(f"split {name}: {info['scenes']} scenes, {info['episodes']} episodes")
     for scene, why in sorted(result.summary["infeasible"].items()):
         console.print(f"[yellow]infeasible[/yellow] {scene}: {why}")

@@ -86,3 +86,26 @@ def test_policy_from_a_file_and_clear_errors(tmp_path: Path) -> None:
         load_policy(f"{tmp_path / 'absent.py'}:Forward")
     with pytest.raises(SongError, match="has no attribute 'Backward'"):
         load_policy(f"{path}:Backward")
+
+
+def test_config_show_lists_every_setting_with_its_description() -> None:
+    from song.config import SongConfig
+
+    code, out = _invoke(["config", "show", "--stage", "crowd"])
+    assert code == 0 and out.splitlines()[0] == "[crowd]"
+    fields = SongConfig.model_fields["crowd"].annotation.model_fields
+    for name, info in fields.items():
+        assert any(line.startswith(f"{name} = ") and (info.description or "") in line for line in out.splitlines())
+    code, out = _invoke(["config", "show", "--stage", "bogus"])
+    assert code == 2 and "no such section" in out
+
+
+def test_generate_refuses_to_overwrite_a_different_package(tmp_path: Path) -> None:
+    out = tmp_path / "scenes"
+    args = ["scenes", "generate", "--count", "1", "--out", str(out), "--no-splat"]
+    assert _invoke([*args, "--seed", "0"])[0] == 0
+    before = (out / "office_0000" / "semantic_map.json").read_bytes()
+    code, text = _invoke([*args, "--seed", "1"])
+    assert code == 2 and "a different package is already there" in text
+    assert (out / "office_0000" / "semantic_map.json").read_bytes() == before  # nothing overwritten
+    assert _invoke([*args, "--seed", "0"])[0] == 0  # the same scene again is fine (resume)

@@ -104,7 +104,8 @@ def _episode_table(run: RunFolder, config_sha: str, goal_radius: float) -> pa.Ta
         "n_pedestrians": [len(ids) for ids in src["pedestrian_ids"]],
         "pedestrian_ids": src["pedestrian_ids"],
         "config_sha256": [config_sha] * n,
-        # manifests graded before these were recorded: no reference pedestrian, no predicted encounter
+        # manifests graded before these were recorded: all test, no reference pedestrian, no predicted encounter
+        "split": src.get("split", ["test"] * n),
         "reference_ped_id": src.get("reference_ped", [-1] * n),
         "encounter_time": src.get("encounter_time", [None] * n),
     }
@@ -183,6 +184,20 @@ def _git_commit() -> str:
         return ""
 
 
+def _remove_abandoned(bench_dir: Path) -> None:
+    """Remove hidden temporary folders of exports whose process no longer runs (killed with kill -9)."""
+    for tmp in bench_dir.glob(".*.tmp-*") if bench_dir.is_dir() else []:
+        pid = tmp.name.rpartition("-")[2]
+        if not pid.isdigit() or not tmp.is_dir() or tmp.is_symlink():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            shutil.rmtree(tmp, ignore_errors=True)
+        except PermissionError:
+            pass  # alive, another user's
+
+
 def _created() -> str:
     epoch = os.environ.get("SOURCE_DATE_EPOCH")
     if epoch is not None and not epoch.strip().isdigit():
@@ -254,6 +269,7 @@ def export_bench(
     robot = config.robot
     episodes = _episode_table(run, run_info.config_sha256, robot.goal_radius_m)
     scene_ids = sorted(set(episodes.column("scene_id").to_pylist()))
+    _remove_abandoned(bench_dir)
     tmp = bench_dir / f".{version}.tmp-{os.getpid()}"
     if tmp.exists():
         shutil.rmtree(tmp)

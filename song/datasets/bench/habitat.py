@@ -36,9 +36,25 @@ def to_habitat_rotation(yaw: float) -> list[float]:
 
 
 def export_habitat(bench: Benchmark, out: str | Path) -> Path:
-    """Write ``out`` (``.json.gz``) with one Habitat PointNav episode per release episode; gzip mtime 0."""
+    """Habitat PointNav episodes; gzip mtime 0.
+
+    ``out`` ending in ``.json.gz``: one file with every episode. Otherwise a folder laid out as
+    Habitat's datasets are, one ``<split>/<split>.json.gz`` per split of the release (``test`` only
+    for releases before schema 1.3). Returns the file or the folder.
+    """
+    out = Path(out)
+    rows = bench.episodes_table.to_pylist()
+    if out.name.endswith(".json.gz"):
+        return _write_habitat(bench, rows, out)
+    for split in sorted(bench.splits()):
+        chosen = [r for r in rows if (r.get("split") or "test") == split]
+        _write_habitat(bench, chosen, out / split / f"{split}.json.gz")
+    return out
+
+
+def _write_habitat(bench: Benchmark, rows: list[dict], out: Path) -> Path:
     episodes = []
-    for row in bench.episodes_table.to_pylist():
+    for row in rows:
         start = to_habitat_point(np.asarray(row["start_position"]))
         goal = to_habitat_point(np.asarray(row["goal_position"]))
         episodes.append(
@@ -56,9 +72,8 @@ def export_habitat(bench: Benchmark, out: str | Path) -> Path:
                 },
             }
         )
-    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    payload = json.dumps({"episodes": episodes}, sort_keys=True).encode("utf-8")
+    payload = json.dumps({"episodes": episodes}, sort_keys=True, allow_nan=False).encode("utf-8")
     with open(out, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0, filename="") as handle:
         handle.write(payload)
     return out

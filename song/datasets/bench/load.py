@@ -152,9 +152,27 @@ class Benchmark:
         """Every episode id, in table order."""
         return self.episodes_table.column("episode_id").to_pylist()
 
-    def episodes(self, difficulty: str | None = None, scene: str | None = None) -> Iterator[Episode]:
-        """Typed episodes in episode-id order, optionally filtered by difficulty and scene."""
+    def splits(self) -> set[str]:
+        """The splits this release holds (``{"test"}`` before schema 1.3)."""
         table = self.episodes_table
+        return set(table.column("split").to_pylist()) if "split" in table.column_names else {"test"}
+
+    def episodes(
+        self, difficulty: str | None = None, scene: str | None = None, split: str | None = None
+    ) -> Iterator[Episode]:
+        """Typed episodes in episode-id order, optionally filtered by difficulty, scene and split.
+
+        Releases before schema 1.3 have no split column: all their episodes are ``test``.
+        """
+        table = self.episodes_table
+        if split is not None:
+            names = self.splits()
+            if split not in names:
+                raise BenchmarkError(
+                    f"{self.root}: no split '{split}' in this release (it has {', '.join(sorted(names))})"
+                )
+            if "split" in table.column_names:
+                table = table.filter(pc.equal(table.column("split"), split))
         if difficulty is not None and difficulty not in DIFFICULTIES:
             raise BenchmarkError(f"unknown difficulty '{difficulty}': use one of {', '.join(DIFFICULTIES)}")
         if difficulty is not None:
@@ -195,6 +213,7 @@ class Benchmark:
             factors=factors,
             params=self.params,
             gaussians_path=self.blob(self._scenes[scene_id]["gaussians"]),
+            split=row.get("split") or "test",
             reference_ped_id=int(row.get("reference_ped_id", -1)),
             encounter_time=float("nan") if row.get("encounter_time") is None else float(row["encounter_time"]),
         )

@@ -12,7 +12,7 @@ from song.datasets.run.crowd import CROWD_COLUMNS
 
 SCHEMA_VERSION = "1.3.0"  # 1.1: info.json records the pedestrian body radius; 1.2: the fingerprint covers info.json;
 # 1.3: info.json records how the crowd was made (avoidance model, speed profile, personal space, scenario length),
-# episodes record their reference pedestrian and the predicted encounter time
+# episodes record their split, reference pedestrian and predicted encounter time
 INFO_FINGERPRINT_SINCE = (1, 2, 0)  # releases of this schema or later fingerprint their info.json too
 FORMAT_NAME = "song.bench"
 PARQUET_COMPRESSION = "zstd"
@@ -71,6 +71,7 @@ EPISODES = pa.schema(
         ("n_pedestrians", pa.int32()),
         ("pedestrian_ids", pa.list_(pa.int32())),
         ("config_sha256", pa.string()),
+        ("split", pa.string()),  # schema ≥ 1.3: train | val | test … (whole scenes per split; before 1.3: test)
         ("reference_ped_id", pa.int32()),  # schema ≥ 1.3: the pedestrian the mode is about (-1: random)
         ("encounter_time", pa.float64()),  # schema ≥ 1.3: predicted time of the closest pass with it, s (null: none)
     ]

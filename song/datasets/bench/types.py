@@ -123,6 +123,7 @@ class Episode:
         avatars: avatar bindings, one per pedestrian that has one.
         params: the runtime parameters the episode is run with (the release's, unless overridden).
         gaussians_path: the scene's Gaussian PLY inside the release, or None when it has none.
+        split: the split of the episode's scene ("train", "val", "test", …; "test" before schema 1.3).
         reference_ped_id: the pedestrian the sampling mode is about (co/counter-directional: the one
             whose walk the robot follows or meets; encounter: the walking one passed within 1 m); -1
             for random episodes and releases before schema 1.3.
@@ -149,6 +150,7 @@ class Episode:
     factors: dict[str, float] = field(default_factory=dict)
     params: RuntimeParams = field(default_factory=RuntimeParams)
     gaussians_path: Path | None = None
+    split: str = "test"
     reference_ped_id: int = -1
     encounter_time: float = float("nan")
 

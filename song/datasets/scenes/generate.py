@@ -23,6 +23,7 @@ from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, Seman
 from song.datasets.scenes.package import write_scene_package
 from song.datasets.scenes.raster import Rasterizer
 from song.datasets.scenes.splat import SPACING_M, dress_package, write_proxy
+from song.errors import SceneError, SongError
 from song.geometry.freespace import components, erode
 from song.util import derive_rng
 
@@ -345,6 +346,7 @@ def generate_scene(
         regions=regions,
         objects=objects,
     )
+    _refuse_overwrite(Path(out_dir) / scene_id, smap, cells)
     root = write_scene_package(Path(out_dir) / scene_id, smap, cells)
     hints = DressingHints(openings=tuple(openings), ceiling_height_m=WALL_HEIGHT_M, seed=seed)
     if splat:
@@ -352,6 +354,25 @@ def generate_scene(
     else:
         write_proxy(root, hints)
     return root
+
+
+def _refuse_overwrite(root: Path, smap: SemanticMap, cells: np.ndarray) -> None:
+    """Refuse to replace a package that holds a different scene (e.g. made with another seed)."""
+    if not (root / "semantic_map.json").exists():
+        return
+    from song.datasets.scenes import load_scene_package
+
+    try:
+        old = load_scene_package(root)
+        same = old.semantic_map == smap and np.array_equal(old.occupancy.cells, cells)
+    except SongError:
+        same = False
+    if not same:
+        raise SceneError(
+            root / "semantic_map.json",
+            "scene_id",
+            "a different package is already there (another seed?); generate into another --out or remove it first",
+        )
 
 
 def generate_scenes(

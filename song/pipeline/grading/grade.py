@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from dataclasses import dataclass
@@ -167,20 +168,85 @@ def _scene_job(args: tuple[str, str, str, str, int]):
     return scene_id, *_scene_episodes(scene_id, Path(scenes_dir), Path(run_dir), config, quota)
 
 
+def parse_splits(spec: str) -> dict[str, float]:
+    """``"train:val:test=8:1:1"`` → ``{"train": 0.8, "val": 0.1, "test": 0.1}`` (shares of the scenes)."""
+    from song.errors import ConfigError
+
+    names, _, weights = spec.partition("=")
+    parts, values = [n.strip() for n in names.split(":")], weights.split(":")
+    try:
+        shares = [float(v) for v in values]
+    except ValueError:
+        shares = []
+    if len(parts) != len(shares) or len(set(parts)) != len(parts) or not all(parts) or min(shares, default=-1) < 0:
+        raise ConfigError("--split", spec, "expected names=weights, e.g. train:val:test=8:1:1")
+    if "test" not in parts or sum(shares) <= 0:
+        raise ConfigError("--split", spec, "needs a 'test' split and a positive total weight")
+    total = sum(shares)
+    return {name: share / total for name, share in zip(parts, shares, strict=True)}
+
+
+def scene_split(scene_id: str, splits: dict[str, float]) -> str:
+    """The split of a scene: a stable hash of its id placed on the cumulative shares.
+
+    The hash depends on the id only, so adding scenes never moves a scene to another split.
+    """
+    u = int(hashlib.sha256(scene_id.encode()).hexdigest()[:15], 16) / 16**15
+    edge = 0.0
+    for name, share in splits.items():
+        edge += share
+        if u < edge:
+            return name
+    return next(reversed(splits))
+
+
 def grade_run(
-    run_dir: str | Path, config: SongConfig | None = None, n_episodes: int | None = None, workers: int = 1
+    run_dir: str | Path,
+    config: SongConfig | None = None,
+    n_episodes: int | None = None,
+    workers: int = 1,
+    splits: dict[str, float] | None = None,
+    split_episodes: dict[str, int] | None = None,
 ) -> GradingResult:
     """Sample, measure and grade episodes over every scene of a run; write the manifest.
 
     Scenes are sampled independently (seeds per scene and episode), optionally in ``workers``
-    processes; the manifest does not depend on the worker count.
+    processes; the manifest does not depend on the worker count. With ``splits`` (shares of the
+    scenes by name, see :func:`parse_splits`) whole scenes go to one split each (:func:`scene_split`),
+    every split is graded on its own (bins and difficulty within the split), ``test`` gets
+    ``n_episodes`` and the others what ``split_episodes`` asks (default ``n_episodes``). Without
+    splits every scene is in ``test``.
     """
     run = RunFolder(Path(run_dir))
     run_info = read_run_info(run.root)
     config = config or run_info.config
-    cfg = config.grading
-    total = n_episodes or cfg.n_episodes
+    total = n_episodes or config.grading.n_episodes
+    splits = splits or {"test": 1.0}
     scene_ids = run.scene_ids(having=CROWD_FILE)
+    by_split = {name: [s for s in scene_ids if scene_split(s, splits) == name] for name in splits}
+    rows, infeasible, binning = [], {}, {}
+    for name, ids in by_split.items():
+        wanted = total if name == "test" else (split_episodes or {}).get(name, total)
+        got, why = _sample(ids, run, run_info, config, wanted, workers)
+        infeasible.update(why)
+        binning[name] = _grade(got, config.grading)
+        rows += [{**r, "split": name} for r in got]
+    rows.sort(key=lambda r: r["episode_id"])
+    table = pa.Table.from_pylist(rows) if rows else pa.table({"episode_id": pa.array([], pa.string())})
+    summary = _summary(rows, infeasible, total) | {
+        "bins": binning["test"] if list(splits) == ["test"] else binning,
+        "splits": {name: {"scenes": len(ids), "episodes": sum(r["split"] == name for r in rows)}
+                   for name, ids in by_split.items()},
+    }  # fmt: skip
+    buffer = io.BytesIO()
+    pq.write_table(table, buffer, compression="zstd", compression_level=9)
+    write_bytes_atomic(run.episodes_manifest, buffer.getvalue())
+    write_json_atomic(run.grading_summary, summary)
+    return GradingResult(table, summary)
+
+
+def _sample(scene_ids: list[str], run: RunFolder, run_info, config: SongConfig, total: int, workers: int):
+    """Episodes of ``scene_ids`` (``total`` spread over them), sorted by id, and why modes were infeasible."""
     rows, infeasible = [], {}
     quotas = _quotas(scene_ids, total)
     jobs = [(sid, str(run_info.scenes_dir), str(run.root), config.model_dump_json(), quotas[sid]) for sid in scene_ids]
@@ -189,6 +255,11 @@ def grade_run(
         if why:
             infeasible[scene_id] = why
     rows.sort(key=lambda r: r["episode_id"])
+    return rows, infeasible
+
+
+def _grade(rows: list[dict], cfg: GradingConfig) -> dict:
+    """Bin the factors, score and split ``rows`` by difficulty in place; returns the bin report."""
     ids = [r["episode_id"] for r in rows]
     values = {f: np.array([r[f] for r in rows], dtype=np.float64) for f in FACTORS}
     binning = {}
@@ -201,13 +272,7 @@ def grade_run(
     difficulty = split_difficulty(score, values["n_encounters"], values["path_length"], ids, cfg)
     for row, s, d in zip(rows, score, difficulty, strict=True):
         row["score"], row["difficulty"] = int(s), str(d)
-    table = pa.Table.from_pylist(rows) if rows else pa.table({"episode_id": pa.array([], pa.string())})
-    summary = _summary(rows, infeasible, total) | {"bins": binning}
-    buffer = io.BytesIO()
-    pq.write_table(table, buffer, compression="zstd", compression_level=9)
-    write_bytes_atomic(run.episodes_manifest, buffer.getvalue())
-    write_json_atomic(run.grading_summary, summary)
-    return GradingResult(table, summary)
+    return binning
 
 
 def _summary(rows: list[dict], infeasible: dict, requested: int) -> dict:

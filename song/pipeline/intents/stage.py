@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -249,7 +251,7 @@ def _scene_summary(package: ScenePackage) -> str:
 
 
 def llm_proposals(package: ScenePackage, geodesic: dict, n: int, config: SongConfig, client, cache_dir: Path | None):
-    """Prompt A (scene description) then prompt B (routine selection) → (proposals, description)."""
+    """Prompt A (scene description) then prompt B (routine selection) → (proposals, description, prompts' sha256)."""
     cfg = config.intents
     call = {
         "cache_dir": cache_dir,
@@ -257,16 +259,16 @@ def llm_proposals(package: ScenePackage, geodesic: dict, n: int, config: SongCon
         "backoff_s": cfg.backoff_base_s,
         "max_concurrency": cfg.max_concurrency,
     }
-    description = structured_call(
-        client, load_prompt("scene_description").format(scene=_scene_summary(package)), SceneDescription, **call
-    )
+    prompt_a = load_prompt("scene_description").format(scene=_scene_summary(package))
+    description = structured_call(client, prompt_a, SceneDescription, **call)
     best = sorted(geodesic.items(), key=lambda item: (-item[1], item[0]))[:MAX_CANDIDATES]
     candidates = "\n".join(f"- {a} -> {b}: {length:.1f} m" for (a, b), length in best)
     prompt = load_prompt("route_selection").format(
         description=description.description, candidates=candidates, count=2 * n, venue=package.semantic_map.venue_type
     )
     selection = structured_call(client, prompt, RoutineSelection, **call)
-    return [(r.start_object, r.goal_object, r.activity) for r in selection.routines], description.description
+    digest = hashlib.sha256(f"{prompt_a}\n\n{prompt}".encode()).hexdigest()
+    return [(r.start_object, r.goal_object, r.activity) for r in selection.routines], description.description, digest
 
 
 def generate_intents(
@@ -284,22 +286,29 @@ def generate_intents(
         provenance = Provenance(provider="offline", model=OfflineIntentModel().model)
         return IntentSet(scene_id=package.scene_id, provenance=provenance, intents=[], notes=notes)
     provider = choose_provider(config.intents.llm)
-    description, llm_error = "", ""
+    description, llm_error, kept = "", "", None
     offline = OfflineIntentModel()
     if provider != "offline":
+        digest = ""
         try:
             client = make_client(provider, config)
-            proposals, description = llm_proposals(package, geodesic, n, config, client, cache_dir)
-            provenance = Provenance(provider=provider, model=client.model)
+            proposals, description, digest = llm_proposals(package, geodesic, n, config, client, cache_dir)
+            provenance = Provenance(provider=provider, model=client.model, prompt_sha256=digest)
+            kept, rejected = filter_intents(proposals, package, walk, snaps, config, provenance, rng, n)
+            if not kept:  # e.g. every routine names objects the scene does not have: as good as no answer
+                reasons = Counter(r.reason for r in rejected)
+                detail = ", ".join(f"{reason} {count}" for reason, count in sorted(reasons.items()))
+                raise LLMError(f"none of the model's {len(proposals)} routines passed the filters ({detail})")
         except (LLMError, MissingDependencyError) as exc:
             llm_error = scrub(str(exc))
             model = config.intents.gemini_model if provider == "gemini" else config.intents.openai_model
-            provenance = Provenance(provider=provider, model=model, fallback=True)
-            proposals = offline.propose(package.semantic_map, geodesic, 2 * n, rng)
+            provenance = Provenance(provider=provider, model=model, fallback=True, prompt_sha256=digest)
+            kept = None
     else:
         provenance = Provenance(provider="offline", model=offline.model)
+    if kept is None:
         proposals = offline.propose(package.semantic_map, geodesic, 2 * n, rng)
-    kept, rejected = filter_intents(proposals, package, walk, snaps, config, provenance, rng, n)
+        kept, rejected = filter_intents(proposals, package, walk, snaps, config, provenance, rng, n)
     kept = extend_routines(kept, package, walk, snaps, config, rng)
     return IntentSet(
         scene_id=package.scene_id,

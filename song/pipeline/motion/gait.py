@@ -43,6 +43,10 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import rest_joints
 from song.pipeline.motion.types import Motion, Trajectory, body_heading
 
+# Walk ratio (step length / step frequency) is constant per person across speeds and varies between
+# adults by about ±10 % around 0.38 m·s (Sekiya & Nagasaki 1998, Gait Posture 7:225; 0.34-0.42 m·s).
+WALK_RATIO_SPREAD = (0.9, 1.1)
+LEG_REACH = 0.999  # the pelvis is lowered so that no ankle target lies beyond this share of the leg
 SWING = 0.8  # swing length in step units (40 % of a 2-step stride)
 REST_PHASE = 0.9  # the phase rests in the middle of a double support (s mod 1 = 0.9)
 _MOVE_SPEED = 0.08  # m/s: below this the plan is "standing"
@@ -52,9 +56,16 @@ _SETTLE_YAW = 0.3  # rad: same for foot yaw
 _GRAVITY = 9.81
 # The foot lands under the hip 0.48 steps after touchdown (40 % into its 1.2-step stance), not at
 # mid-stance: heel-off at the end of stance lifts the ankle, so the leg reaches farther behind than ahead.
-_PLACE_AT = 0.48
-_TOE_OFF_DEG = 30.0  # foot pitch at lift-off (heel raised, rolling over the ball)
+_PLACE_AT = 0.55
+_TOE_OFF_DEG = 40.0  # foot pitch at lift-off (heel raised, rolling over the ball)
+# The heel rises over the last quarter of stance (terminal stance, ~45-60 % of the cycle: Perry & Burnfield
+# 2010); rising earlier bends the trailing knee while the pelvis is low at the opposite heel strike.
+HEEL_RISE_FROM = 0.75
 _HEEL_STRIKE_DEG = 10.0  # foot pitch at touchdown (toes up)
+# Foot lift over the swing (fractions of the swing): it rises fast after toe-off and comes down over the
+# second half, so the knee flexes most in initial swing and extends while the foot reaches forward
+# (peak knee flexion at ~70-75 % of the cycle, hip flexion ~30° at terminal swing: Perry & Burnfield 2010).
+SWING_LIFT_RISE, SWING_LIFT_FALL = 0.2, 0.3
 
 
 @dataclass(frozen=True)
@@ -82,11 +93,11 @@ class GaitStyle:
 def sample_style(
     rng: np.random.Generator, height_range: tuple[float, float] = (1.5, 1.95), walk_ratio: float = 0.38
 ) -> GaitStyle:
-    """Draw a style. Heights: normal(1.71 m, 0.09 m) clipped to ``height_range``; WR within ±5 %."""
+    """Draw a style. Heights: normal(1.71 m, 0.09 m) clipped to ``height_range``; WR within ±10 %."""
     lo, hi = height_range
     return GaitStyle(
         height_m=float(np.clip(rng.normal(1.71, 0.09), lo, hi)),
-        walk_ratio=float(walk_ratio * rng.uniform(0.95, 1.05)),
+        walk_ratio=float(walk_ratio * rng.uniform(*WALK_RATIO_SPREAD)),
         arm_swing=float(rng.uniform(0.7, 1.3)),
         elbow_flex_deg=float(rng.uniform(8.0, 20.0)),
         lean_deg=float(rng.uniform(1.0, 5.0)),
@@ -230,10 +241,9 @@ class _Body:
         self.heel = np.array([r[J["left_ankle"], 0] - 0.03 * height, 0.0, 0.0])  # heel point x, on floor
         self.ankle_h = float(r[J["left_ankle"], 2])
         self.half_width = float(r[J["left_hip"], 1])
-        self.leg = float(
-            np.linalg.norm(r[J["left_knee"]] - r[J["left_hip"]])
-            + np.linalg.norm(r[J["left_ankle"]] - r[J["left_knee"]])
-        )
+        # the hip-ankle distance of the rest pose: the skeleton's knee is slightly bent at rest, so a leg
+        # stretched farther than this would bend the knee backwards (knee flexion is measured from rest)
+        self.leg = float(np.linalg.norm(r[J["left_ankle"]] - r[J["left_hip"]]))
 
 
 def _foot_poses(
@@ -265,7 +275,9 @@ def _foot_poses(
         return np.stack([px + ax * cos, py + ax * sin, body.ankle_h + piv_local[2] + az], axis=-1)
 
     tau = np.clip((u - SWING) / (2.0 - SWING), 0.0, 1.0)
-    stance_pitch = beta_off * _smoothstep((tau - 0.45) / 0.55) - beta_on * (1.0 - _smoothstep(tau / 0.15))
+    stance_pitch = beta_off * _smoothstep((tau - HEEL_RISE_FROM) / (1.0 - HEEL_RISE_FROM)) - beta_on * (
+        1.0 - _smoothstep(tau / 0.15)
+    )
     heel_phase = tau < 0.3
     stance_pos = np.where(
         heel_phase[:, None],
@@ -278,7 +290,7 @@ def _foot_poses(
     progress = _min_jerk((sigma - 0.06) / 0.88)
     distance = np.linalg.norm(end[:, :2] - start[:, :2], axis=1)
     lift = np.clip(0.05 + 0.05 * distance, 0.05, 0.09) * h_scale
-    bump = _smoothstep(sigma / 0.25) * _smoothstep((1.0 - sigma) / 0.3)
+    bump = _smoothstep(sigma / SWING_LIFT_RISE) * _smoothstep((1.0 - sigma) / SWING_LIFT_FALL)
     swing_pos = start + (end - start) * progress[:, None]
     swing_pos[:, 2] = start[:, 2] + (end[:, 2] - start[:, 2]) * sigma + lift * bump
     swing_yaw = prev[:, 2] + wrap_angle(cur[:, 2] - prev[:, 2]) * progress
@@ -288,6 +300,12 @@ def _foot_poses(
     pitch = np.where(in_swing, swing_pitch, stance_pitch)
     del side
     return ankle, yaw, pitch, ~in_swing
+
+
+def _within(v: np.ndarray, length: float) -> np.ndarray:
+    """Vectors ``(T, 3)`` shortened to at most ``length``."""
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    return v * np.minimum(1.0, length / np.maximum(norm, 1e-12))
 
 
 def _slerp_matrix(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
@@ -307,7 +325,7 @@ def _lowered_pelvis(
         horizontal = np.linalg.norm(ankle[:, :2] - hip[:, :2], axis=1)
         vertical = np.sqrt(np.maximum(reach * reach - horizontal * horizontal, (0.5 * reach) ** 2))
         cap = np.minimum(cap, ankle[:, 2] + vertical - (hip[:, 2] - pelvis_z))
-    radius = 4
+    radius = 1
     if len(cap) > 1:
         cap = minimum_filter1d(cap, 2 * radius + 1, mode="nearest")
         cap = gaussian_filter1d(cap, radius / 2.0, mode="nearest", truncate=2.0)
@@ -356,12 +374,12 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     pelvis = np.empty((n, 3))
     pelvis[:, :2] = traj.xy + sway[:, None] * left
     breathing = np.sin(2 * np.pi * 0.25 * t + style.idle_phase)
-    z_nominal = rest[0, 2] - walk * 0.025 * h_scale + walk * style.bob_m * np.cos(2 * np.pi * (phase - 1.4))
+    z_nominal = rest[0, 2] - walk * 0.0 * h_scale + walk * style.bob_m * np.cos(2 * np.pi * (phase - 1.4))
     z_nominal = z_nominal + idle * 0.002 * breathing
     hip_offsets = [rot_pelvis @ (rest[J[name]] - rest[0]) for name in ("left_hip", "right_hip")]
     pelvis[:, 2] = z_nominal
     hips = [pelvis + off for off in hip_offsets]
-    pelvis[:, 2] = _lowered_pelvis(z_nominal, hips, ankles, z_nominal, body.leg * (0.995 - 0.01 * walk))
+    pelvis[:, 2] = _lowered_pelvis(z_nominal, hips, ankles, z_nominal, body.leg * LEG_REACH)
     hips = [pelvis + off for off in hip_offsets]
 
     glob = np.broadcast_to(np.eye(3), (n, 24, 3, 3)).copy()
@@ -381,6 +399,8 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         knee_rest = hip + rest[J[knee_name]] - rest[J[hip_name]]
         ankle_rest = hip + rest[J[ankle_name]] - rest[J[hip_name]]
         bend_pole = pole + pelvis_fwd
+        reach = hip + _within(ankle - hip, body.leg * LEG_REACH)  # never stretched past the rest pose
+        ankle = np.where((np.linalg.norm(ankle - hip, axis=1) > body.leg * LEG_REACH)[:, None], reach, ankle)
         _, _, thigh, shin = two_bone_ik(hip, knee_rest, ankle_rest, ankle, bend_pole, np.array([1.0, 0.0, 0.0]))
         glob[:, J[hip_name]] = thigh
         glob[:, J[knee_name]] = shin

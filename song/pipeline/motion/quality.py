@@ -136,3 +136,56 @@ def motion_quality(
         "elbow_flexion_min_deg": r(np.degrees(flex["elbow"].min()), 3),
         "elbow_flexion_max_deg": r(np.degrees(flex["elbow"].max()), 3),
     }
+
+
+# Normative ranges the procedural gait is held to (issue 18), healthy adults walking at 1.0-1.4 m/s:
+# knee flexion ~0-5° at heel strike, a 10-25° loading-response wave, 55-68° peak in swing, hip sagittal
+# range 35-50° (Perry & Burnfield, Gait Analysis, 2nd ed. 2010, ch. 7-8; Winter, Biomechanics and Motor
+# Control of Human Gait, 1991); walk ratio 0.34-0.44 m·s across 0.5-1.6 m/s (Sekiya & Nagasaki 1998,
+# Gait Posture 7:225); cadence 100-120 steps/min at 1.3 m/s (Grieve & Gear 1966; Oberg et al. 1993).
+NORMATIVE = {
+    "knee_heel_strike_deg": (0.0, 8.0),
+    "knee_loading_peak_deg": (10.0, 25.0),
+    "knee_swing_peak_deg": (55.0, 68.0),
+    "hip_range_deg": (35.0, 50.0),
+    "walk_ratio_m_s": (0.34, 0.44),
+}
+CADENCE_AT_1_3_SPM = (100.0, 120.0)
+LOADING_WINDOW = 0.15  # loading response: the first 15 % of the gait cycle after heel strike
+STEADY_MPS = 0.3  # strides whose planned speed stays above this count
+
+
+def gait_cycle_figures(local_quats: np.ndarray, contacts: np.ndarray, t: np.ndarray, speed: np.ndarray) -> dict:
+    """Sagittal joint figures per steady stride, as medians over the strides (degrees, m·s, steps/min).
+
+    A stride runs from one touchdown (contact onset) of a foot to its next; knee flexion is the
+    knee's local rotation about +y, hip flexion minus the hip's (the thigh swinging forward). Returns
+    ``{}`` when no stride is steady.
+    """
+    aa = np.degrees(quat_to_axis_angle(local_quats))
+    rows = []
+    for foot, (hip, knee) in enumerate(((J["left_hip"], J["left_knee"]), (J["right_hip"], J["right_knee"]))):
+        c = contacts[:, foot]
+        onsets = np.flatnonzero(c[1:] & ~c[:-1]) + 1
+        for a, b in zip(onsets[:-1], onsets[1:], strict=True):
+            v = speed[a : b + 1]
+            if v.min() < STEADY_MPS:
+                continue
+            flex = aa[a : b + 1, knee, 1]
+            hip_flex = -aa[a : b + 1, hip, 1]
+            load = flex[: max(2, int(round(LOADING_WINDOW * (b - a))) + 1)]
+            cadence = 2.0 / (t[b] - t[a])  # steps/s
+            rows.append(
+                {
+                    "speed_mps": float(v.mean()),
+                    "knee_heel_strike_deg": float(flex[0]),
+                    "knee_loading_peak_deg": float(load.max()),
+                    "knee_swing_peak_deg": float(flex.max()),
+                    "hip_range_deg": float(hip_flex.max() - hip_flex.min()),
+                    "walk_ratio_m_s": float(v.mean() / cadence**2),
+                    "cadence_spm": float(60.0 * cadence),
+                }
+            )
+    if not rows:
+        return {}
+    return {key: round(float(np.median([r[key] for r in rows])), 4) for key in rows[0]} | {"strides": len(rows)}

@@ -126,7 +126,7 @@ def synthesize_motions(
             final.t,
             traj.xy,
             traj.speed,
-            cfg.walk_ratio_m_s,
+            motion.info.get("walk_ratio_m_s", cfg.walk_ratio_m_s),  # the pedestrian's own walk ratio
             cfg.min_cadence_spm,
         )
         info = dict(motion.info)

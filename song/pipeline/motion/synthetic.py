@@ -63,3 +63,9 @@ def synthetic_trajectories(seconds: float = 12.0) -> dict[str, Trajectory]:
     walk_stop = _ramp(n, rise, 1.0) * np.where(t < seconds / 2, 1.0, np.clip(1.0 - (t - seconds / 2) / 1.0, 0.0, 1.0))
     out["walk_then_stop"] = trajectory_from_profiles(15, walk_stop, zero)
     return out
+
+
+def steady_walk(speed: float, seconds: float = 12.0) -> Trajectory:
+    """A straight walk that ramps up over 1 s, then holds ``speed`` m/s (for gait-cycle figures)."""
+    n = int(seconds * FPS)
+    return trajectory_from_profiles(0, _ramp(n, FPS, speed), np.zeros(n))

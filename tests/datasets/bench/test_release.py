@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
@@ -181,3 +182,44 @@ def test_habitat_projection(graded_run, tmp_path: Path) -> None:
     forward = np.array([-np.sin(angle), 0.0, -np.cos(angle)])
     np.testing.assert_allclose(forward, [1.0, 0.0, 0.0], atol=1e-12)
     shutil.rmtree(release)
+
+
+def test_splits_in_the_release_and_eval_defaults_to_test(graded_run, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    run = graded_run()
+    manifest = run / "manifest" / "episodes.parquet"
+    table = pq.read_table(manifest)
+    split = ["train" if s == "scene_1" else "test" for s in table.column("scene_id").to_pylist()]
+    pq.write_table(table.append_column("split", pa.array(split)), manifest)
+    release = bench.open(export_bench(run, tmp_path / "bench", "1.0.0").path)
+    assert release.splits() == {"train", "test"}
+    assert {e.scene_id for e in release.episodes(split="train")} == {"scene_1"}
+    assert {e.split for e in release.episodes(split="test")} == {"test"}
+    with pytest.raises(BenchmarkError, match="no split 'val'"):
+        list(release.episodes(split="val"))
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(app, ["eval", "--bench", str(release.root), "--policy", "straight", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    evaluated = pq.read_table(next(out.rglob("*.parquet"))).column("episode_id").to_pylist()
+    assert evaluated and all(e.startswith("scene_0") for e in evaluated)  # test split only
+    from song.datasets.bench.habitat import export_habitat
+
+    folder = export_habitat(release, tmp_path / "habitat")
+    for name, scene in (("train", "scene_1"), ("test", "scene_0")):  # Habitat's <split>/<split>.json.gz
+        episodes = json.loads(gzip.decompress((folder / name / f"{name}.json.gz").read_bytes()))["episodes"]
+        assert episodes and {e["scene_id"] for e in episodes} == {scene}
+
+
+def test_next_export_removes_a_killed_exports_temporary_folder(graded_run, tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    leftover = tmp_path / "bench" / f".0.9.0.tmp-{int(dead.stdout)}"  # as kill -9 during export leaves it
+    (leftover / "data").mkdir(parents=True)
+    export_bench(graded_run(), tmp_path / "bench", "1.0.0")
+    assert not leftover.exists()
+    assert [p.name for p in (tmp_path / "bench").iterdir()] == ["1.0.0"]

@@ -13,8 +13,9 @@ import pytest
 from song.config import GradingConfig, SongConfig
 from song.datasets.run import RunFolder, read_crowd
 from song.datasets.scenes import load_scene_package
+from song.errors import ConfigError
 from song.pipeline.grading import count_turns, grade_run, split_difficulty, tercile_bins
-from song.pipeline.grading.grade import BINS, FACTORS
+from song.pipeline.grading.grade import BINS, FACTORS, parse_splits, scene_split
 from song.pipeline.grading.sample import Crowd, RobotMap, closest_pass, pass_distances, subtended_deg
 from tests.conftest import SAMPLES
 
@@ -164,3 +165,35 @@ def test_modes_deliver_their_interaction(graded, sample_run: Path) -> None:
         assert row["t0"] <= row["encounter_time"] <= run_end + 1e-6
         checked += 1
     assert checked >= len(rows) // 2
+
+
+def test_scene_splits_are_stable_when_scenes_are_added() -> None:
+    splits = parse_splits("train:val:test=8:1:1")
+    assert splits == pytest.approx({"train": 0.8, "val": 0.1, "test": 0.1})
+    old = {f"scene_{k}": scene_split(f"scene_{k}", splits) for k in range(200)}
+    new = {f"scene_{k}": scene_split(f"scene_{k}", splits) for k in range(400)}
+    assert all(new[s] == split for s, split in old.items())  # adding scenes never moves old ones
+    shares = {name: list(new.values()).count(name) / 400 for name in splits}
+    assert shares == pytest.approx(splits, abs=0.05)
+    for bad in ("train:test", "train:val=1:1", "train:test=1:x", "a:a:test=1:1:1", "train:val=1:1:1"):
+        with pytest.raises(ConfigError):
+            parse_splits(bad)
+
+
+def test_graded_splits_are_scene_disjoint(sample_run: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(sample_run, run)
+    splits = parse_splits("train:test=1:1")
+    result = grade_run(run, n_episodes=12, splits=splits, split_episodes={"train": 20})
+    rows = result.episodes.to_pylist()
+    by_scene = {}
+    for r in rows:
+        by_scene.setdefault(r["scene_id"], set()).add(r["split"])
+        assert r["split"] == scene_split(r["scene_id"], splits)
+    assert all(len(s) == 1 for s in by_scene.values())  # every scene in exactly one split
+    counts = {name: sum(r["split"] == name for r in rows) for name in splits}
+    assert counts == {"train": 20, "test": 12}
+    for name in splits:  # graded within the split: 20 % hard of each
+        subset = [r for r in rows if r["split"] == name]
+        assert sum(r["difficulty"] == "hard" for r in subset) == round(0.2 * len(subset))
+    assert result.summary["splits"]["test"]["episodes"] == 12

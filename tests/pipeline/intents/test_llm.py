@@ -57,6 +57,7 @@ def _no_key_anywhere(tmp_path: Path, result) -> None:
 def test_success_uses_structured_output_and_caches(make_scene, tmp_path, monkeypatch, kind) -> None:
     result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(200, DESC, 0), (200, GOOD, 0)])
     assert result.provenance.provider == kind and not result.provenance.fallback
+    assert len(result.provenance.prompt_sha256) == 64
     assert {(i.start_object, i.goal_object) for i in result.intents} <= {("desk_1", "sofa_1"), ("printer_1", "sofa_1")}
     assert result.intents and result.description.startswith("An office")
     first = server.requests[0]
@@ -74,6 +75,14 @@ def test_success_uses_structured_output_and_caches(make_scene, tmp_path, monkeyp
     _no_key_anywhere(tmp_path, result)
     again, server2 = _run(make_scene, tmp_path, monkeypatch, kind, [])  # cached: no request at all
     assert server2.requests == [] and again.model_dump_json() == result.model_dump_json()
+
+
+def test_a_reply_naming_only_unknown_objects_falls_back(make_scene, tmp_path, monkeypatch) -> None:
+    reply = routines(("ghost_9", "sofa_1"), ("desk_1", "nowhere_2"))
+    result, _ = _run(make_scene, tmp_path, monkeypatch, "openai", [(200, DESC, 0), (200, reply, 0)])
+    assert result.provenance.fallback and result.intents  # the offline model stood in
+    assert "none of the model's 2 routines passed the filters (unknown_object 2)" in result.llm_error
+    assert len(result.provenance.prompt_sha256) == 64  # which prompts were sent is recorded even so
 
 
 @pytest.mark.parametrize("kind", ["gemini", "openai"])

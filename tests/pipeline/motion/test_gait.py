@@ -34,7 +34,7 @@ def results():
             final.t,
             traj.xy,
             traj.speed,
-            CFG.walk_ratio_m_s,
+            raw.info["walk_ratio_m_s"],
             CFG.min_cadence_spm,
         )
         out[name] = (traj, raw, final, quality)
@@ -165,3 +165,44 @@ def test_yaw_flips_in_the_plan_become_bounded_turns():
         joints, final.local_quats, final.rest_joints, final.contacts, final.t, traj.xy, traj.speed, 0.38, 85
     )
     assert q["foot_skating_ratio"] <= 0.02
+
+
+@pytest.fixture(scope="module")
+def cycle_figures():
+    from song.pipeline.motion.quality import gait_cycle_figures
+    from song.pipeline.motion.synthetic import steady_walk
+
+    out = {}
+    for v in (0.8, 1.0, 1.3, 1.6):
+        traj = steady_walk(v)
+        raw = ProceduralGait(CFG).generate([traj], [""], [7])[0]
+        final, _ = postprocess(raw, traj)
+        out[v] = gait_cycle_figures(final.local_quats, final.contacts, final.t, traj.speed)
+    return out
+
+
+def test_knee_follows_the_normative_curve(cycle_figures) -> None:
+    """Perry & Burnfield 2010: loading-response wave 10-25°, peak swing 55-68° (at 1.0-1.3 m/s).
+
+    Heel strike ≤ 8° holds at 1.0 m/s; faster, the skeleton's short legs (hip-ankle 0.44 × height, vs
+    0.49 in anthropometric tables) force a flexed knee at the normative step length (docs/motion.md).
+    """
+    from song.pipeline.motion.quality import NORMATIVE
+
+    for v in (1.0, 1.3):
+        f = cycle_figures[v]
+        assert (
+            NORMATIVE["knee_loading_peak_deg"][0] <= f["knee_loading_peak_deg"] <= NORMATIVE["knee_loading_peak_deg"][1]
+        )
+        assert NORMATIVE["knee_swing_peak_deg"][0] <= f["knee_swing_peak_deg"] <= NORMATIVE["knee_swing_peak_deg"][1]
+        assert f["knee_heel_strike_deg"] < f["knee_loading_peak_deg"] + 1.0 < f["knee_swing_peak_deg"]
+    assert cycle_figures[1.0]["knee_heel_strike_deg"] <= NORMATIVE["knee_heel_strike_deg"][1]
+
+
+def test_walk_ratio_and_cadence_follow_speed(cycle_figures) -> None:
+    """Sekiya & Nagasaki 1998: walk ratio constant within 0.34-0.44 m·s; 100-120 steps/min at 1.3 m/s."""
+    for v, f in cycle_figures.items():
+        assert 0.34 <= f["walk_ratio_m_s"] <= 0.44, (v, f)
+    assert 100.0 <= cycle_figures[1.3]["cadence_spm"] <= 120.0
+    cadence = [cycle_figures[v]["cadence_spm"] for v in sorted(cycle_figures)]
+    assert all(np.diff(cadence) > 0)  # faster walkers take faster steps too
