@@ -14,8 +14,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from song.errors import ConfigError
-from song.util import sha256_json
 
+SURFEL_SPACING_M = 0.035  # default Gaussian surfel spacing of synthesised scenes: ~300 k–1 M per indoor scene
 DEFAULT_FPS = 30  # pedestrian trajectories and motion (paper: 30 FPS); releases record the value used
 
 
@@ -217,6 +217,8 @@ def config_value(config: BaseModel, key: str) -> Any:
 
 def config_hash(config: BaseModel) -> str:
     """sha256 of a config's canonical JSON; written into every output that the config shaped."""
+    from song.util import sha256_json  # numpy and friends: not needed to read a config
+
     return sha256_json(config.model_dump(mode="json"))
 
 

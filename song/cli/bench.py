@@ -9,10 +9,6 @@ import typer
 
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
-from song.datasets.bench import open_benchmark
-from song.datasets.bench.export import export_bench
-from song.datasets.bench.habitat import export_habitat
-from song.datasets.bench.release import diff_releases, list_versions, resolve_version, summarize, verify_release
 
 bench_app = typer.Typer(help="Benchmark releases: list, verify, diff, export to Habitat.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
@@ -29,6 +25,8 @@ def export_bench_command(
     amass: bool = typer.Option(False, "--amass", help="also ship each pedestrian's AMASS motion file"),
 ) -> None:
     """Write an immutable, versioned Parquet release of a graded run."""
+    from song.datasets.bench.export import export_bench  # imported here: `--help` stays fast
+
     result = export_bench(run, bench, version, parent, notes, amass)
     console.print(
         f"released {result.path}: {result.n_episodes} episodes, {result.n_bytes / 1e6:.1f} MB, "
@@ -40,6 +38,8 @@ def export_bench_command(
 @handle_errors
 def list_command(bench: Path = typer.Argument(..., help="benchmark folder")) -> None:
     """Versions with fingerprints and counts."""
+    from song.datasets.bench.release import list_versions, summarize
+
     rows = [summarize(bench / version) for version in list_versions(bench)]
     columns = ["version", "schema", "parent", "episodes", "scenes", "fingerprint", "created"]
     console.print(status_table(f"releases in {bench}", rows, columns))
@@ -52,6 +52,8 @@ def verify_command(
     version: str | None = typer.Argument(None, help="version (default: latest)"),
 ) -> None:
     """Recompute every hash; report missing, extra and altered files (exit 1 if any)."""
+    from song.datasets.bench.release import resolve_version, verify_release
+
     report = verify_release(resolve_version(bench, version))
     for kind in ("missing", "extra", "altered"):
         for rel in getattr(report, kind):
@@ -72,6 +74,8 @@ def diff_command(
     as_json: bool = typer.Option(False, "--json", help="print the full diff as JSON"),
 ) -> None:
     """Added, removed and changed episodes, and schema changes, between two versions."""
+    from song.datasets.bench.release import diff_releases, resolve_version
+
     diff = diff_releases(resolve_version(bench, old), resolve_version(bench, new))
     if as_json:
         console.print_json(json.dumps(diff))
@@ -92,5 +96,8 @@ def export_habitat_command(
     version: str | None = typer.Option(None, "--version", help="version (default: latest)"),
 ) -> None:
     """Habitat PointNav episodes (json.gz, Y-up)."""
+    from song.datasets.bench import open_benchmark
+    from song.datasets.bench.habitat import export_habitat
+
     path = export_habitat(open_benchmark(bench, version), out)
     console.print(f"wrote {path}")

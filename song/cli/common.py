@@ -5,14 +5,16 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import wraps
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
-from song.config import SongConfig, load_config, parse_assignments
 from song.errors import SongError
+
+if TYPE_CHECKING:
+    from song.config import SongConfig
 
 console = Console(stderr=False, highlight=False)
 err_console = Console(stderr=True, highlight=False)
@@ -53,6 +55,8 @@ def handle_errors(func: F) -> F:
 
 def make_config(path: Path | None, seed: int | None = None, sets: list[str] | None = None) -> SongConfig:
     """Load the config file (or defaults) and apply ``--seed`` and ``--set`` overrides, all validated."""
+    from song.config import load_config, parse_assignments
+
     overrides: dict[str, Any] = parse_assignments(sets or [])
     if seed is not None:
         overrides["seed"] = seed

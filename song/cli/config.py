@@ -5,19 +5,19 @@ from __future__ import annotations
 import json
 
 import typer
-from pydantic import BaseModel
 
 from song.cli import app
 from song.cli.common import handle_errors
-from song.config import SongConfig
 from song.errors import ConfigError
 
 config_app = typer.Typer(help="Inspect the configuration.", no_args_is_help=True)
 app.add_typer(config_app, name="config")
 
 
-def config_lines(model: BaseModel, prefix: str = "") -> list[str]:
+def config_lines(model, prefix: str = "") -> list[str]:
     """``key = value  # description`` for every field of ``model`` (sections recursively)."""
+    from pydantic import BaseModel
+
     lines = []
     for name, info in type(model).model_fields.items():
         value = getattr(model, name)
@@ -35,6 +35,10 @@ def show(
     stage: str | None = typer.Option(None, "--stage", help="only this section (intents, crowd, motion, ...)"),
 ) -> None:
     """Print the defaults (TOML sections; units in the descriptions); override with ``--set section.key=value``."""
+    from pydantic import BaseModel
+
+    from song.config import SongConfig
+
     config = SongConfig()
     if stage is None:
         typer.echo("\n".join(config_lines(config)).strip())

@@ -9,11 +9,6 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from song.cli import app
 from song.cli.common import ConfigOption, SetOption, console, err_console, handle_errors, parse_size
-from song.config import parse_assignments, read_config_mapping
-from song.datasets.bench import open_benchmark
-from song.runtime.evaluate import iter_eval, make_setup, write_results
-from song.runtime.metrics import markdown_table
-from song.runtime.params import apply_overrides
 
 
 @app.command("eval")
@@ -49,6 +44,12 @@ def eval_command(
     The robot, camera and pedestrian parameters come from the release; a config file or ``--set`` that
     changes them needs ``--override``, and the results then record the change.
     """
+    from song.config import parse_assignments, read_config_mapping
+    from song.datasets.bench import open_benchmark  # imported here: `--help` stays fast
+    from song.runtime.evaluate import iter_eval, make_setup, write_results
+    from song.runtime.metrics import markdown_table
+    from song.runtime.params import apply_overrides
+
     release = open_benchmark(bench)
     requested = read_config_mapping(config) if config else {}
     for section, values in parse_assignments(sets or []).items():

@@ -8,8 +8,6 @@ import typer
 
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
-from song.pipeline.grading import grade_run
-from song.pipeline.grading.grade import parse_splits
 
 
 @app.command("grade")
@@ -28,6 +26,9 @@ def grade(
 
     ``--episodes`` is the test split's count (the paper's official set: 500, graded 100/200/200).
     """
+    from song.pipeline.grading import grade_run
+    from song.pipeline.grading.grade import parse_splits
+
     extra = {k: v for k, v in (("train", train_episodes), ("val", val_episodes)) if v}
     splits = parse_splits(split) if split else None
     result = grade_run(run, n_episodes=episodes, workers=workers, splits=splits, split_episodes=extra)

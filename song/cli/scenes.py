@@ -9,18 +9,28 @@ from rich import box
 
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
-from song.datasets.scenes import find_scene_packages, load_scene_package
-from song.datasets.scenes.splat import SPACING_M
 from song.errors import SongError
+
+# the default is song.config.SURFEL_SPACING_M, resolved when a command runs (the CLI starts without the config)
+SpacingOption = typer.Option(
+    None, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m (default 0.035)", show_default=False
+)
 
 scenes_app = typer.Typer(help="Scene packages: validate, import, generate.", no_args_is_help=True)
 app.add_typer(scenes_app, name="scenes")
+
+
+def _spacing(value: float | None) -> float:
+    from song.config import SURFEL_SPACING_M
+
+    return SURFEL_SPACING_M if value is None else value
 
 
 @scenes_app.command("check")
 @handle_errors
 def check(folder: Path = typer.Argument(..., help="a scene package, or a folder of them")) -> None:
     """Validate scene packages: a status table, then one line per failed package; exit 1 if any fails."""
+    from song.datasets.scenes import find_scene_packages, load_scene_package
     from song.datasets.scenes.ply import check_gaussian_ply
 
     rows, problems = [], []
@@ -69,13 +79,15 @@ def import_scenes(
         None, "--assets", help="ProcTHOR asset database JSON (default: the procthor package's)"
     ),
     splat: bool = typer.Option(True, "--splat/--no-splat", help="also write the Gaussian scene (PLY)"),
-    spacing: float = typer.Option(SPACING_M, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m"),
+    spacing: float | None = SpacingOption,
 ) -> None:
     """Convert real layouts into scene packages; one bad house fails alone."""
     if kind == "procthor":
         from song.datasets.scenes.procthor import import_procthor
 
-        results = import_procthor(src, out, resolution=resolution, assets=assets, splat=splat, spacing=spacing)
+        results = import_procthor(
+            src, out, resolution=resolution, assets=assets, splat=splat, spacing=_spacing(spacing)
+        )
         for result in results:
             if result.warning:
                 console.print(f"[yellow]warning[/yellow] {result.warning}", soft_wrap=True)
@@ -98,12 +110,12 @@ def generate(
     out: Path = typer.Option(..., "--out", help="folder for the packages"),
     seed: int = typer.Option(0, "--seed", help="generator seed (same seed → identical bytes)"),
     splat: bool = typer.Option(True, "--splat/--no-splat", help="also write the Gaussian scene (PLY)"),
-    spacing: float = typer.Option(SPACING_M, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m"),
+    spacing: float | None = SpacingOption,
 ) -> None:
     """Procedural venues (office, clinic, lobby, shop, restaurant, home, library) with all four files."""
     from song.datasets.scenes.generate import generate_scenes
 
-    paths = generate_scenes(count, seed, out, splat=splat, spacing=spacing)
+    paths = generate_scenes(count, seed, out, splat=splat, spacing=_spacing(spacing))
     console.print(f"wrote {len(paths)} scene packages to {out}")
 
 
@@ -112,12 +124,13 @@ def generate(
 def splat_command(
     folder: Path = typer.Argument(..., help="a scene package, or a folder of them"),
     out: Path | None = typer.Option(None, "--out", help="write complete copies here (default: in place)"),
-    spacing: float = typer.Option(SPACING_M, "--spacing", min=0.005, max=0.5, help="Gaussian surfel spacing, m"),
+    spacing: float | None = SpacingOption,
     force: bool = typer.Option(False, "--force", help="also replace Gaussian scenes that exist"),
 ) -> None:
     """Synthesise the Gaussian scene (and USD proxy) of packages that lack one, from their geometry."""
     import shutil
 
+    from song.datasets.scenes import find_scene_packages
     from song.datasets.scenes.package import GAUSSIANS
     from song.datasets.scenes.splat import dress_package
 
@@ -132,7 +145,7 @@ def splat_command(
             rows.append({"scene": root.name, "status": "skipped", "gaussians": "exists"})
             continue
         try:
-            result = dress_package(target, spacing=spacing)
+            result = dress_package(target, spacing=_spacing(spacing))
         except SongError as exc:
             rows.append({"scene": root.name, "status": "failed", "gaussians": str(exc)})
             continue

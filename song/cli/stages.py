@@ -9,9 +9,6 @@ import typer
 from song.cli import app
 from song.cli.common import SetOption, WorkersOption, handle_errors
 from song.cli.synth import run_chain_command
-from song.config import load_config, parse_assignments
-from song.parallel import default_workers
-from song.pipeline.chain import read_run
 
 
 @app.command("rerun")
@@ -29,6 +26,10 @@ def rerun(
     ``song rerun motion --run RUN --set motion.generator=kimodo``;
     ``song rerun binding --run RUN --set binding.avatars_dir=/abs/avatars --set binding.materialize=true``.
     """
+    from song.config import load_config, parse_assignments
+    from song.parallel import default_workers
+    from song.pipeline.chain import read_run
+
     scenes_dir, config = read_run(run)
     overrides = parse_assignments(sets or [])
     base = config.model_dump(mode="json")

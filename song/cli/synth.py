@@ -6,6 +6,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -21,11 +22,11 @@ from song.cli.common import (
     make_config,
     status_table,
 )
-from song.config import SongConfig
-from song.datasets.scenes import find_scene_packages
 from song.errors import SongError
-from song.parallel import default_workers
-from song.pipeline.chain import RunSummary, SceneResult, iter_run, load_stages, summarize_run
+
+if TYPE_CHECKING:  # the pipeline is imported when a command runs, so that `--help` starts fast
+    from song.config import SongConfig
+    from song.pipeline.chain import RunSummary, SceneResult
 
 
 def run_chain_command(
@@ -40,6 +41,9 @@ def run_chain_command(
     scene_ids: list[str] | None = None,
 ) -> list[SceneResult]:
     """Run the chain with a progress display (or JSON lines when ``quiet``) and print the summary."""
+    from song.datasets.scenes import find_scene_packages
+    from song.pipeline.chain import iter_run, load_stages, summarize_run
+
     names = stage_names or [stage.name for stage in load_stages()]
     if "binding" in names:
         from song.pipeline.binding.pool import ensure_pool
@@ -117,6 +121,9 @@ def synth(
     stages: str | None = typer.Option(None, "--stages", help="comma-separated subset of stages (default: all)"),
 ) -> None:
     """Run every registered per-scene stage on every scene package (resumable, parallel)."""
+    from song.parallel import default_workers
+    from song.pipeline.chain import load_stages
+
     cfg = make_config(config, seed, sets)
     names = [name.strip() for name in stages.split(",")] if stages else None
     if out.exists() and not out.is_dir():

@@ -109,3 +109,19 @@ def test_generate_refuses_to_overwrite_a_different_package(tmp_path: Path) -> No
     assert code == 2 and "a different package is already there" in text
     assert (out / "office_0000" / "semantic_map.json").read_bytes() == before  # nothing overwritten
     assert _invoke([*args, "--seed", "0"])[0] == 0  # the same scene again is fine (resume)
+
+
+def test_help_starts_without_the_heavy_libraries() -> None:
+    """`song --help` stays fast (≤ 0.5 s CPU, issue 21): the CLI imports the pipeline only when a command runs."""
+    code = "import sys, song.cli; print(sorted({m.split('.')[0] for m in sys.modules} & HEAVY))"
+    heavy = "{'numpy', 'scipy', 'numba', 'torch', 'pyarrow', 'pydantic', 'cv2', 'shapely'}"
+    out = subprocess.run([sys.executable, "-c", code.replace("HEAVY", heavy)], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_spacing_help_names_the_real_default() -> None:
+    from song.config import SURFEL_SPACING_M
+
+    code, out = _invoke(["scenes", "generate", "--help"])
+    words = [w for w in out.replace("│", " ").split() if w]  # rich wraps help text inside a box
+    assert code == 0 and f"(default {SURFEL_SPACING_M:g})" in " ".join(words)

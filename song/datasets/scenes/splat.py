@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from song.config import SURFEL_SPACING_M
 from song.datasets.scenes.dressing import Dressing, DressingHints, build_dressing
 from song.datasets.scenes.furniture import Part
 from song.datasets.scenes.materials import texture
@@ -35,7 +36,7 @@ from song.datasets.scenes.ply import SH_C0, GaussianCloud
 from song.geometry.freespace import clearance_field
 from song.util import derive_rng
 
-SPACING_M = 0.035  # default surfel spacing: ~300 k–1 M Gaussians for an indoor scene
+SPACING_M = SURFEL_SPACING_M  # default surfel spacing (song.config, where the CLI reads it without this module)
 WIDTH_FACTOR = 0.6  # in-plane σ as a fraction of the local spacing (no holes from 0.3 m; edges bleed ≈ ½ spacing)
 THIN_FACTOR = 0.06  # σ along the normal as a fraction of the local spacing
 JITTER = 0.2  # sample positions jitter by this fraction of the spacing
