@@ -38,7 +38,7 @@ demo: setup
 	$(SONG) bench verify $(BENCH)
 	$(SONG) eval --bench $(BENCH) --policy straight --policy astar --policy social --out $(EVAL) --workers 2
 	# the vision baseline renders every step: a first slice of the release at 160x120 keeps the demo short
-	$(SONG) eval --bench $(BENCH) --policy depth --resolution 160x120 --limit 24 --out $(EVAL)-depth --workers 2
+	$(SONG) eval --bench $(BENCH) --policy depth --resolution 160x120 --limit 8 --out $(EVAL)-depth --workers 2
 	$(SONG) viz bench $(BENCH) --out $(FIGURES) --results $(EVAL)/straight.json --results $(EVAL)/astar.json --results $(EVAL)/social.json
 	$(SONG) viz scene $(SCENES)/procthor_house_6 --out $(FIGURES)/scene.png
 	$(SONG) viz crowd $(RUN) --scene procthor_house_6 --out $(FIGURES)

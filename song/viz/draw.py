@@ -104,14 +104,18 @@ def write_mp4(path: str | Path, frames: Iterable[np.ndarray], fps: float) -> Pat
 
 
 def label(image: np.ndarray, text: str, at: tuple[int, int], rgb=(20, 20, 20), size: float = 0.4) -> None:
-    """Text with a white halo so it stays readable over any background.
+    """Text on a light, slightly transparent box so it stays readable over any background.
 
-    The halo is the text itself drawn at one-pixel offsets (a thicker stroke would also widen
-    OpenCV's glyph advance and drift away from the text).
+    (An earlier white halo of offset copies of the text read as ghost letters over dark areas.)
     """
     import cv2
 
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    (w, h), base = cv2.getTextSize(text, font, size, 1)
     x, y = at
-    for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1), (0, -2), (0, 2), (-2, 0), (2, 0)):
-        cv2.putText(image, text, (x + dx, y + dy), cv2.FONT_HERSHEY_SIMPLEX, size, (255, 255, 255), 1, cv2.LINE_AA)
-    cv2.putText(image, text, at, cv2.FONT_HERSHEY_SIMPLEX, size, rgb, 1, cv2.LINE_AA)
+    y0, y1 = max(0, y - h - 3), min(image.shape[0], y + base + 2)
+    x0, x1 = max(0, x - 3), min(image.shape[1], x + w + 3)
+    if y1 > y0 and x1 > x0:
+        box = image[y0:y1, x0:x1].astype(np.float32)
+        image[y0:y1, x0:x1] = (0.2 * box + 0.8 * 255).astype(image.dtype)
+    cv2.putText(image, text, at, font, size, rgb, 1, cv2.LINE_AA)

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from song.config import SongConfig
-from song.datasets.run.intents import Intent, Leg, Provenance
+from song.datasets.run.intents import Intent, Leg
 from song.datasets.scenes import Region, SemanticMap, load_scene_package, write_scene_package
 from song.datasets.scenes.model import OccupancySpec
 from song.pipeline.crowd.avoidance import make_avoidance
 from song.pipeline.crowd.navmesh import scene_navmesh
 from song.pipeline.crowd.simulate import plan_crowd
 from song.util import derive_rng
+from tests.pipeline.crowd.test_simulate import intent
 
 CFG = SongConfig().crowd
 R = CFG.agent_radius_m
@@ -42,18 +43,7 @@ def room(root: Path, width: float, height: float, scene_id: str) -> Path:
 
 
 def walker(k: int, start, goal, speed: float = 0.9, depart: float = 0.0, legs: list[Leg] | None = None) -> Intent:
-    return Intent(
-        id=k,
-        activity="walk",
-        start_object="a",
-        goal_object="b",
-        start_xy=start,
-        goal_xy=goal,
-        speed=speed,
-        depart_time=depart,
-        provenance=Provenance(provider="offline", model="test"),
-        legs=legs or [],
-    )
+    return intent(k, start, goal, speed, depart).model_copy(update={"legs": legs or []})
 
 
 def simulate(scene: Path, intents: list[Intent], avoidance: str = "orca"):
