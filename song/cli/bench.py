@@ -86,6 +86,8 @@ def diff_command(
     )
     for name, change in diff["schema_changes"].items():
         console.print(f"schema {name}: added {change['added']} removed {change['removed']}")
+    for name, change in diff["content_changes"].items():
+        console.print(f"columns {name}: now filled {change['filled']}, now empty {change['emptied']}")
 
 
 @bench_app.command("export-habitat")

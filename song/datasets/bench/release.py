@@ -109,8 +109,25 @@ def _schemas(info: Info) -> dict[str, list[str]]:
     return {name: table.columns for name, table in info.tables.items()}
 
 
+def _filled_columns(release: Path) -> dict[str, set[str]]:
+    """Per table, the columns holding at least one value (the release opened confined and bounded)."""
+    from song.datasets.bench.load import Benchmark
+
+    bench = Benchmark(release)
+    tables = {"episodes": bench.episodes_table, "scenes": bench.scenes_table,
+              "pedestrians": bench.pedestrians_table, "avatars": bench.avatars_table}  # fmt: skip
+    return {
+        name: {c for c in table.column_names if table.num_rows and table.column(c).null_count < table.num_rows}
+        for name, table in tables.items()
+    }
+
+
 def diff_releases(old: Path, new: Path) -> dict[str, Any]:
-    """Added, removed and changed episodes (by id, then by content) and schema changes."""
+    """Differences between two releases.
+
+    Added, removed and changed episodes (by id, then by content), schema changes, and columns that
+    gained or lost all their values (e.g. AMASS files shipped by one version and not the other).
+    """
     old_info, new_info = read_info(old / INFO_PATH), read_info(new / INFO_PATH)
     a, b = _episode_digests(old), _episode_digests(new)
     schema_changes = {}
@@ -119,6 +136,13 @@ def diff_releases(old: Path, new: Path) -> dict[str, Any]:
         before, after = set(old_s.get(name, [])), set(new_s.get(name, []))
         if before != after:
             schema_changes[name] = {"added": sorted(after - before), "removed": sorted(before - after)}
+    old_f, new_f = _filled_columns(old), _filled_columns(new)
+    content_changes = {}
+    for name in sorted(set(old_f) & set(new_f)):
+        shared = set(old_s.get(name, [])) & set(new_s.get(name, []))
+        filled, emptied = (new_f[name] - old_f[name]) & shared, (old_f[name] - new_f[name]) & shared
+        if filled or emptied:
+            content_changes[name] = {"filled": sorted(filled), "emptied": sorted(emptied)}
     return {
         "old": old_info.dataset_version,
         "new": new_info.dataset_version,
@@ -128,4 +152,5 @@ def diff_releases(old: Path, new: Path) -> dict[str, Any]:
         "changed": sorted(k for k in set(a) & set(b) if a[k] != b[k]),
         "unchanged": sum(1 for k in set(a) & set(b) if a[k] == b[k]),
         "schema_changes": schema_changes,
+        "content_changes": content_changes,
     }

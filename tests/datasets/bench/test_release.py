@@ -121,6 +121,23 @@ def test_diff_reports_added_removed_changed(graded_run, tmp_path: Path) -> None:
     diff = diff_releases(a, b)
     assert diff["added"] == [f"scene_2-{e:03d}" for e in range(5)]
     assert diff["removed"] == [] and len(diff["changed"]) == 10
+    assert diff["content_changes"] == {}
+
+
+def test_diff_reports_columns_that_gained_values(graded_run, tmp_path: Path) -> None:
+    """A later version that fills a column the earlier left empty (as --amass does) is reported."""
+    run = graded_run("a")
+    manifest = run / "manifest" / "episodes.parquet"
+    full = pq.read_table(manifest)
+    pq.write_table(full.drop_columns(["encounter_time"]), manifest)  # graded before encounter times existed
+    a = export_bench(run, tmp_path / "bench", "1.0.0").path
+    pq.write_table(full, manifest)
+    b = export_bench(run, tmp_path / "bench", "1.1.0").path
+    diff = diff_releases(a, b)
+    assert diff["schema_changes"] == {} and diff["content_changes"] == {
+        "episodes": {"filled": ["encounter_time"], "emptied": []}
+    }
+    assert diff_releases(b, a)["content_changes"]["episodes"] == {"filled": [], "emptied": ["encounter_time"]}
 
 
 def test_plain_parquet_and_duckdb_query(graded_run, tmp_path: Path) -> None:
