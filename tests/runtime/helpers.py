@@ -2,10 +2,25 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 
 from song.config import RobotConfig
-from song.datasets.bench.types import Episode, PedestrianTrack, RuntimeParams, StaticMap
+from song.datasets.bench.types import AvatarBinding, Episode, PedestrianTrack, RuntimeParams, StaticMap
+
+
+def bound_scene(scene_dir: Path) -> tuple[list[PedestrianTrack], list[AvatarBinding]]:
+    """The pedestrian tracks and avatar bindings a crowd + binding run wrote into ``scene_dir``."""
+    from song.pipeline.motion import read_trajectories
+
+    bindings = json.loads((scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]
+    tracks = [PedestrianTrack(t.ped_id, t.t, t.xy, t.yaw) for t in read_trajectories(scene_dir / "crowd.parquet")]
+    avatars = [
+        AvatarBinding(b["ped_id"], b["avatar_id"], Path(b["asset_path"]), scene_dir / b["cache_file"]) for b in bindings
+    ]
+    return tracks, avatars
 
 
 def room_map(width: float = 10.0, height: float = 6.0, res: float = 0.05, walls: list | None = None) -> StaticMap:

@@ -2,27 +2,19 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from song.datasets.bench.types import AvatarBinding, PedestrianTrack
-from song.pipeline.motion import read_trajectories
 from song.runtime.avatars import count_inside_volume, gaussian_poser, make_collider
 from tests.pipeline.binding.test_stage import _bound, pool  # noqa: F401  (module-scoped pool fixture)
-from tests.runtime.helpers import episode
+from tests.runtime.helpers import bound_scene, episode
 
 
 def test_collider_poses_the_bound_avatars(make_scene, tmp_path: Path, pool) -> None:  # noqa: F811
     ctx = _bound(make_scene, tmp_path, pool)
-    bindings = json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]
-    tracks = [PedestrianTrack(t.ped_id, t.t, t.xy, t.yaw) for t in read_trajectories(ctx.scene_dir / "crowd.parquet")]
-    avatars = [
-        AvatarBinding(b["ped_id"], b["avatar_id"], Path(b["asset_path"]), ctx.scene_dir / b["cache_file"])
-        for b in bindings
-    ]
+    tracks, avatars = bound_scene(ctx.scene_dir)
     ep = replace(episode(peds=tracks), avatars=avatars)
     pose = gaussian_poser(ep)
     assert pose is not None

@@ -2,19 +2,17 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from song.datasets.bench.types import AvatarBinding, PedestrianTrack, pedestrian_states
-from song.pipeline.motion import read_trajectories
+from song.datasets.bench.types import pedestrian_states
 from song.render import robot_camera
 from song.runtime.robot import Pose
 from song.runtime.vision import SceneView
 from tests.pipeline.binding.test_stage import _bound, pool  # noqa: F401  (module-scoped pool fixture)
-from tests.runtime.helpers import episode, track
+from tests.runtime.helpers import bound_scene, episode, track
 
 W, H = 160, 120
 
@@ -51,12 +49,7 @@ def test_body_proxy_appears_at_its_projected_pixel() -> None:
 
 def test_lbs_posed_avatar_appears_where_the_crowd_put_it(make_scene, tmp_path: Path, pool) -> None:  # noqa: F811
     ctx = _bound(make_scene, tmp_path, pool)
-    bindings = json.loads((ctx.scene_dir / "binding" / "bindings.json").read_text())["pedestrians"]
-    tracks = [PedestrianTrack(t.ped_id, t.t, t.xy, t.yaw) for t in read_trajectories(ctx.scene_dir / "crowd.parquet")]
-    avatars = [
-        AvatarBinding(b["ped_id"], b["avatar_id"], Path(b["asset_path"]), ctx.scene_dir / b["cache_file"])
-        for b in bindings
-    ]
+    tracks, avatars = bound_scene(ctx.scene_dir)
     ped = tracks[0]
     ep = replace(episode(peds=[ped]), avatars=[a for a in avatars if a.ped_id == ped.ped_id])
     view = SceneView(backend="numba")
