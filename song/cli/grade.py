@@ -37,8 +37,7 @@ def grade(
     console.print(
         status_table(f"{result.summary['episodes']} episodes in {run}/manifest", rows, ["difficulty", *modes])
     )
-    bins = result.summary["bins"]
-    for name, reports in bins.items() if "path_length" not in bins else [("test", bins)]:
+    for name, reports in result.summary["bins"].items():
         for factor, report in reports.items():
             occupancy = " / ".join(str(c) for c in report["occupancy"])
             console.print(f"{name} {factor}: bins {occupancy} (easy→hard), {report['distinct']} distinct values")

@@ -234,7 +234,7 @@ def grade_run(
     rows.sort(key=lambda r: r["episode_id"])
     table = pa.Table.from_pylist(rows) if rows else pa.table({"episode_id": pa.array([], pa.string())})
     summary = _summary(rows, infeasible, total) | {
-        "bins": binning["test"] if list(splits) == ["test"] else binning,
+        "bins": binning,  # per split, per factor
         "splits": {name: {"scenes": len(ids), "episodes": sum(r["split"] == name for r in rows)}
                    for name, ids in by_split.items()},
     }  # fmt: skip

@@ -211,13 +211,15 @@ class EpisodeSampler:
             if np.linalg.norm(self.crowd.at(np.array([t0]))[0] - start, axis=1).min() < cfg.start_clearance_m:
                 reason = "a pedestrian stands at the start at t0"
                 continue
-            d = pass_distances(path, self.crowd, t0, cfg.robot_speed_mps, walking_only=mode == "encounter")
-            if mode == "encounter":
-                ref = int(np.argmin(d.min(axis=0)))
-                if d[:, ref].min() > cfg.encounter_pass_m:
-                    reason = "robot never passes within 1 m of a walking pedestrian"
-                    continue
-            meet = round(t0 + int(np.argmin(d[:, ref])) / self.crowd.fps, 3) if ref >= 0 else None
+            meet = None
+            if mode != "random":  # the reference pedestrian and when the robot passes it
+                d = pass_distances(path, self.crowd, t0, cfg.robot_speed_mps, walking_only=mode == "encounter")
+                if mode == "encounter":
+                    ref = int(np.argmin(d.min(axis=0)))
+                    if d[:, ref].min() > cfg.encounter_pass_m:
+                        reason = "robot never passes within 1 m of a walking pedestrian"
+                        continue
+                meet = round(t0 + int(np.argmin(d[:, ref])) / self.crowd.fps, 3)
             return {
                 "start": start,
                 "goal": goal,

@@ -82,7 +82,7 @@ def test_split_and_mode_constraints(graded, sample_run: Path) -> None:
     summary = json.loads(RunFolder(run).grading_summary.read_text())
     for factor, name in zip(FACTORS, BINS, strict=True):  # the summary reports each factor's binning
         occupancy = np.bincount([r[name] for r in rows], minlength=3).tolist()
-        assert summary["bins"][factor] == {"occupancy": occupancy, "distinct": len({r[factor] for r in rows})}
+        assert summary["bins"]["test"][factor] == {"occupancy": occupancy, "distinct": len({r[factor] for r in rows})}
     cfg = SongConfig().grading
     for scene in {r["scene_id"] for r in rows}:
         tracks = read_crowd(sample_run / "scenes" / scene)
