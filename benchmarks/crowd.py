@@ -27,26 +27,26 @@ from song.geometry.navmesh import build_navmesh  # noqa: E402
 SIZE_M, RADIUS_M = 20.0, 0.25
 
 
-def room(seed: int = 0) -> list[np.ndarray]:
-    """Axis-aligned boxes (x0, y0, x1, y1, height): four walls and 25 pieces of furniture."""
+def room(seed: int = 0, size: float = SIZE_M, count: int = 25) -> list[np.ndarray]:
+    """Axis-aligned boxes (x0, y0, x1, y1, height): four walls and ``count`` pieces of furniture."""
     rng = np.random.default_rng(seed)
     boxes = [
-        (0, 0, SIZE_M, 0.1),
-        (0, SIZE_M - 0.1, SIZE_M, SIZE_M),
-        (0, 0, 0.1, SIZE_M),
-        (SIZE_M - 0.1, 0, SIZE_M, SIZE_M),
+        (0, 0, size, 0.1),
+        (0, size - 0.1, size, size),
+        (0, 0, 0.1, size),
+        (size - 0.1, 0, size, size),
     ]
     out = [np.array([*b, 2.5]) for b in boxes]
-    for _ in range(25):
+    for _ in range(count):
         w, d = rng.uniform(0.4, 2.0, 2)
-        x, y = rng.uniform(1.0, SIZE_M - 3.0, 2)
+        x, y = rng.uniform(1.0, size - 3.0, 2)
         out.append(np.array([x, y, x + w, y + d, rng.uniform(0.5, 1.2)]))
     return out
 
 
-def occupancy(boxes: list[np.ndarray], cell: float) -> np.ndarray:
+def occupancy(boxes: list[np.ndarray], cell: float, size: float = SIZE_M) -> np.ndarray:
     """Free mask (rows north-up) of the room at ``cell`` m."""
-    n = int(round(SIZE_M / cell))
+    n = int(round(size / cell))
     free = np.ones((n, n), dtype=bool)
     for x0, y0, x1, y1, _ in boxes:
         c0, c1 = int(np.floor(x0 / cell)), int(np.ceil(x1 / cell))

@@ -6,6 +6,9 @@
   in the same process. Like for like on the 4-connected problem (unit steps, the problem pyastar2d
   solves without diagonals): both lengths and the time ratio. Also our 8-connected √2-cost search
   (what grading uses), which pyastar2d cannot express (its diagonal steps cost 1), so no ratio.
+- A* on serpentine grids (400² and 800²: walls every 4 rows, a gap at alternate ends), where the
+  search must explore most of the grid: 4-connected, ours against pyastar2d interleaved (median of
+  repeats), both lengths.
 - With ``--run``: ``grade_run`` wall time for N episodes on that run (e.g. the 500-scene run that
   ``benchmarks/e2e.py --out DIR`` leaves in DIR/run).
 """
@@ -61,6 +64,42 @@ def astar_figures(n: int, repeats: int) -> dict:
     return out
 
 
+def serpentine(n: int) -> np.ndarray:
+    """(n, n) free mask: a wall every 4th row, open at alternate ends (one long winding corridor)."""
+    free = np.ones((n, n), dtype=bool)
+    for k, r in enumerate(range(3, n - 1, 4)):
+        free[r, :] = False
+        gap = slice(n - 2, n) if k % 2 == 0 else slice(0, 2)
+        free[r, gap] = True
+    return free
+
+
+def serpentine_figures(n: int, repeats: int) -> dict:
+    import pyastar2d
+
+    free = serpentine(n)
+    weights = np.where(free, 1.0, np.inf).astype(np.float32)
+    start, goal = (0, 0), (n - 1, 0)
+    astar(free, start, goal, diagonal=False)
+    ours, theirs = [], []
+    for _ in range(repeats):  # interleaved: the machine's load hits both alike
+        t0 = time.perf_counter()
+        ours_len, _ = astar(free, start, goal, diagonal=False)
+        t1 = time.perf_counter()
+        path = pyastar2d.astar_path(weights, start, goal, allow_diagonal=False)
+        t2 = time.perf_counter()
+        ours.append(t1 - t0)
+        theirs.append(t2 - t1)
+    return {
+        "grid": n,
+        "ours_ms": round(1000 * float(np.median(ours)), 2),
+        "pyastar2d_ms": round(1000 * float(np.median(theirs)), 2),
+        "speed_vs_pyastar2d": round(float(np.median(theirs) / np.median(ours)), 2),
+        "ours_length": ours_len,
+        "pyastar2d_length": float(len(path) - 1),
+    }
+
+
 def grading_figures(run: Path, episodes: int, workers: int) -> dict:
     from song.pipeline.grading import grade_run
 
@@ -76,8 +115,10 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=500)
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
-    result = {"astar_400": astar_figures(400, 3 if args.quick else 15)}
-    result["targets"] = {"astar_4_connected_ratio": 2.0, "grading_500_s": 30.0}
+    repeats = 3 if args.quick else 15
+    result = {"astar_400": astar_figures(400, repeats)}
+    result["serpentine"] = [serpentine_figures(n, repeats) for n in (400, 800)]
+    result["targets"] = {"astar_4_connected_ratio": 2.0, "serpentine_speed_vs_pyastar2d": 1.0, "grading_500_s": 30.0}
     if args.run:
         result["grading"] = grading_figures(args.run, args.episodes, args.workers)
     emit(result)

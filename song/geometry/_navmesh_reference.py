@@ -1,5 +1,8 @@
 """Plain references for the navmesh path queries (used by tests and benchmarks only).
 
+* :func:`visibility_path_reference`: the reduced visibility graph searched as the compiled query does,
+  written with vectorised numpy and scipy's Dijkstra (the implementation the compiled kernel replaced;
+  its twin in tests and benchmarks).
 * :func:`shortest_path_reference`: the full visibility graph over every mesh vertex, each edge checked
   with shapely's exact ``covers`` and searched with networkx — obviously correct, slow.
 * :func:`grid_path_length`: any-direction 16-connected shortest path on a fine grid of points inside
@@ -12,9 +15,75 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from song.geometry.navmesh import Navmesh, _component_rings
+from song.geometry._navmesh_kernel import SHORTEN_M, TOUCH_EPS
+from song.geometry.navmesh import Navmesh, _component_rings, _cross, _ring_links, segments_blocked
 
 STEPS_16 = [(1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)]
+
+
+def segment_clear_reference(mesh: Navmesh, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(N,) bool: segments p→q (shortened by SHORTEN_M at both ends) hit no boundary segment."""
+    p, q = np.atleast_2d(p).astype(np.float64), np.atleast_2d(q).astype(np.float64)
+    d = q - p
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    s = np.minimum(SHORTEN_M, 0.5 * n)
+    u = d / np.maximum(n, 1e-300)
+    p2, q2 = p + u * s, q - u * s
+    hit = segments_blocked(p2[:, None], q2[:, None], mesh.seg_a[None], mesh.seg_b[None])
+    return ~hit.any(axis=1)
+
+
+def tangent_reference(mesh: Navmesh, vids: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """(N,) bool: the line from boundary vertex ``vids`` to ``other`` (N, 2) leaves both its walls on one side."""
+    prev, nxt = _ring_links(len(mesh.vertices), mesh.segments)
+    v = mesh.vertices[vids]
+    d = other - v
+    s1 = _cross(*d.T, *(mesh.vertices[prev[vids]] - v).T)
+    s2 = _cross(*d.T, *(mesh.vertices[nxt[vids]] - v).T)
+    s1[np.abs(s1) < TOUCH_EPS] = 0.0
+    s2[np.abs(s2) < TOUCH_EPS] = 0.0
+    return s1 * s2 >= 0.0
+
+
+def visibility_edges_reference(mesh: Navmesh) -> np.ndarray:
+    """(E, 2) bitangent visible reflex pairs (i < j), every pair tested against every wall."""
+    i, j = np.triu_indices(len(mesh.reflex), k=1)
+    vi, vj = mesh.reflex[i], mesh.reflex[j]
+    ok = tangent_reference(mesh, vi, mesh.vertices[vj]) & tangent_reference(mesh, vj, mesh.vertices[vi])
+    i, j = i[ok], j[ok]
+    clear = segment_clear_reference(mesh, mesh.vertices[mesh.reflex[i]], mesh.vertices[mesh.reflex[j]])
+    return np.stack([i[clear], j[clear]], -1).astype(np.int64)
+
+
+def visibility_path_reference(mesh: Navmesh, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+    """The shortest path (K, 2) between two points of one mesh part over the reduced visibility graph."""
+    start, goal = np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64)
+    if segment_clear_reference(mesh, start[None], goal[None])[0]:
+        return np.array([start, goal])
+    r = len(mesh.reflex)
+    v = mesh.vertices[mesh.reflex]
+
+    def visible(point):
+        idx = np.flatnonzero(tangent_reference(mesh, mesh.reflex, np.broadcast_to(point, v.shape)))
+        idx = idx[segment_clear_reference(mesh, np.broadcast_to(point, (len(idx), 2)), v[idx])]
+        return idx, np.linalg.norm(v[idx] - point, axis=1)
+
+    si, sd = visible(start)
+    gi, gd = visible(goal)
+    e = visibility_edges_reference(mesh)
+    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    rows = np.concatenate([e[:, 0], e[:, 1], np.full(len(si), r), gi])
+    cols = np.concatenate([e[:, 1], e[:, 0], si, np.full(len(gi), r + 1)])
+    data = np.concatenate([w, w, sd, gd])
+    graph = sparse.csr_matrix((np.maximum(data, 1e-12), (rows, cols)), shape=(r + 2, r + 2))
+    dist, pred = csgraph.dijkstra(graph, directed=True, indices=r, return_predecessors=True)
+    if not np.isfinite(dist[r + 1]):
+        return None
+    chain = [r + 1]
+    while pred[chain[-1]] >= 0:
+        chain.append(int(pred[chain[-1]]))
+    nodes = np.array(chain[::-1][1:-1], dtype=np.int64)
+    return np.vstack([start, v[nodes], goal])
 
 
 def mesh_polygons(mesh: Navmesh):

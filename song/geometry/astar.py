@@ -43,11 +43,7 @@ def astar(
         if not (0 <= cell[0] < rows and 0 <= cell[1] < cols) or not free[cell]:
             return np.inf, None
     s, t = start[0] * cols + start[1], goal[0] * cols + goal[1]
-    length, parent = search_kernel(free, s, t, float(limit), STEPS, diagonal)
+    length, nodes = search_kernel(free, s, t, float(limit), STEPS, diagonal)
     if not np.isfinite(length):
         return np.inf, None
-    chain = [t]
-    while chain[-1] != s:
-        chain.append(int(parent[chain[-1]]))
-    nodes = np.array(chain[::-1], dtype=np.int64)
     return float(length), np.column_stack([nodes // cols, nodes % cols])

@@ -55,10 +55,11 @@ def open_passages(mask: np.ndarray, min_width_cells: int) -> np.ndarray:
 def navmesh_min_width_cells(resolution: float, contour_error: float) -> int:
     """Narrowest strip (cells) that survives the navmesh build at ``contour_error``.
 
-    The build traces rings ¼ cell inside the cells' edges and then offsets them ε/2 further inward on
-    both sides (:mod:`song.geometry.navmesh`), so a strip of w cells keeps (w − ½)·res − ε of width.
+    The build traces rings ¼ cell inside the cells' edges and then offsets them ε/2 − ¼ cell further
+    inward on both sides (:mod:`song.geometry.navmesh`), so a strip of w cells keeps
+    (w − ½)·res − max(ε − ½·res, 0) of width, which is positive from w = ⌊ε / res⌋ + 1.
     """
-    return max(1, int(np.floor(contour_error / resolution + 0.5)) + 1)
+    return max(1, int(np.floor(contour_error / resolution + 1e-9)) + 1)
 
 
 def components(mask: np.ndarray) -> tuple[np.ndarray, int]:

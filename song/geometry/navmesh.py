@@ -6,21 +6,26 @@ is a legal centre):
 1. Contours of the legal cells are traced with OpenCV on a 2× upsampled mask (so one-cell-wide
    passages keep a non-zero width); the traced rings run ¼ cell inside the cells' outer edges.
 2. Simplification with error ε (``contour_error``): Douglas–Peucker with tolerance ε/2, then an inward
-   offset of ε/2 (mitred). Douglas–Peucker keeps every point within ε/2 of the traced ring, so the
-   offset result lies inside the traced region: the mesh never leaves the legal cells, and its
-   boundary is at most ε (about one cell) inside them.
+   offset of ε/2 − ¼ cell (mitred; none when ε ≤ ½ cell). Douglas–Peucker keeps every point within
+   ε/2 of the traced ring, so the offset result lies inside the legal cells (the traced ring has ¼
+   cell to spare): the mesh never leaves them, and its boundary is at most ε + ¼ cell inside them.
 3. Triangulation with mapbox-earcut (chosen over shapely's constrained Delaunay: it returns vertex
    indices directly, handles holes, and is several times faster; triangle shape does not matter
    here because paths come from the funnel and the visibility graph, not from triangle centres).
-4. Triangle adjacency (shared vertex pairs), connected components, reflex vertices of the boundary and
-   the reduced visibility graph between them (bitangent, unobstructed pairs).
+4. Triangle adjacency (shared vertex pairs, after splitting edges at T-junctions: earcut leaves
+   zero-area triangles where ring vertices are collinear, and dropping them would cut the mesh along
+   an edge), connected components, reflex vertices of the boundary and the reduced visibility graph
+   between them (bitangent, unobstructed pairs).
 
-Queries (Detour semantics plus exactness): nearest-polygon snapping; A* over triangles with Detour's
-edge-midpoint costs and the funnel (string pulling) over its portals; and the true shortest path
-within the mesh from the reduced visibility graph (shortest paths in a polygonal domain bend only at
-reflex vertices, on bitangent edges). ``find_path`` returns the shorter of the two, which is always
-the visibility-graph path up to rounding. Nothing raises on a bad query: a :class:`PathResult`
-carries ``ok`` / ``partial`` / ``unreachable`` / ``off_mesh`` and a reason.
+Queries (Detour's statuses, exact lengths): nearest-point snapping, then the true shortest path within
+the mesh by A* over the reduced visibility graph (shortest paths in a polygonal domain bend only at
+reflex vertices, on bitangent edges), compiled with numba (:mod:`song.geometry._navmesh_kernel`; the
+numpy implementation it replaced is the reference twin in :mod:`song.geometry._navmesh_reference`).
+Detour's own query (A* over triangles with edge-midpoint costs, then the funnel) is kept as
+:meth:`Navmesh.corridor` and :meth:`Navmesh.funnel_path`; it can go round the wrong side of an
+obstacle. :meth:`Navmesh.distances` answers one source and many goals with one search. Nothing raises
+on a bad query: a :class:`PathResult` carries ``ok`` / ``partial`` / ``unreachable`` / ``off_mesh``
+and a reason.
 """
 
 from __future__ import annotations
@@ -33,11 +38,14 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
+from song.geometry import _navmesh_kernel as _k
+from song.geometry._navmesh_kernel import NUDGE_M, TOUCH_EPS
+
 NAVMESH_FORMAT = 1
-TOUCH_EPS = 1e-12  # |cross| below this (m²) counts as collinear in segment tests (coordinates are ≤ 1 km)
-SHORTEN_M = 1e-7  # query segments are shortened by this at both ends so that touching an endpoint's walls is not a hit
-NUDGE_M = 1e-6  # projected points are moved this far into their triangle, so they are strictly inside
-BUCKET_M = 0.5  # cell size of the spatial hash used for local segment and triangle look-ups
+BUCKET_M = 0.5  # cell size of the spatial hash used for wall and triangle look-ups
+OFFSET_SLACK_M = 1e-4  # added to the inward offset: a strip exactly twice the offset wide must vanish, not
+# collapse into a zero-width bridge between two parts (at ε = 1 cell, one-cell strips are that wide)
+T_JUNCTION_M = 1e-9  # a vertex this close to the inside of a triangle edge splits the edge (see _triangulate)
 PathStatus = Literal["ok", "partial", "unreachable", "off_mesh"]
 
 
@@ -191,24 +199,6 @@ def funnel(portals_left: np.ndarray, portals_right: np.ndarray, start: np.ndarra
     return out[keep]
 
 
-def _hash_boxes(lo: np.ndarray, hi: np.ndarray, origin: np.ndarray, n_cells: np.ndarray) -> np.ndarray:
-    """Spatial hash: (C, K) item ids per bucket (padded with -1) for items with bounding boxes lo/hi (M, 2)."""
-    i0 = np.clip(np.floor((lo - origin) / BUCKET_M).astype(np.int64), 0, n_cells - 1)
-    i1 = np.clip(np.floor((hi - origin) / BUCKET_M).astype(np.int64), 0, n_cells - 1)
-    nx, ny = i1[:, 0] - i0[:, 0] + 1, i1[:, 1] - i0[:, 1] + 1
-    count = nx * ny
-    item = np.repeat(np.arange(len(lo)), count)
-    k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    cell = (i0[item, 1] + k // nx[item]) * n_cells[0] + i0[item, 0] + k % nx[item]
-    order = np.lexsort((item, cell))
-    cell, item = cell[order], item[order]
-    per = np.bincount(cell, minlength=int(n_cells.prod()))
-    table = np.full((len(per), max(1, int(per.max(initial=0)))), -1, dtype=np.int64)
-    slot = np.arange(len(cell)) - np.repeat(np.cumsum(per) - per, per)
-    table[cell, slot] = item
-    return table
-
-
 @dataclass
 class Navmesh:
     """A triangulated navigation mesh (plain data; see :func:`build_navmesh`).
@@ -247,25 +237,52 @@ class Navmesh:
         """(S, 2) end points of the boundary segments, m."""
         return self.vertices[self.segments[:, 1]]
 
-    def _hash(self) -> dict:
-        if "hash" not in self._cache:
-            lo_all = self.vertices.min(axis=0) - BUCKET_M
-            n = np.maximum(np.ceil((self.vertices.max(axis=0) + BUCKET_M - lo_all) / BUCKET_M).astype(np.int64), 1)
-            tri = self.vertices[self.triangles]
-            a, b = self.seg_a, self.seg_b
-            margin = 0.1  # a local query (a step of a few cm) may reach this far beyond its bucket
-            self._cache["hash"] = {
-                "origin": lo_all,
-                "n": n,
-                "tri": _hash_boxes(tri.min(axis=1), tri.max(axis=1), lo_all, n),
-                "seg": _hash_boxes(np.minimum(a, b) - margin, np.maximum(a, b) + margin, lo_all, n),
+    def _kernel(self) -> dict:
+        """Flat arrays for the compiled queries (:mod:`song.geometry._navmesh_kernel`), built once."""
+        if "kernel" not in self._cache:
+            verts = np.ascontiguousarray(self.vertices, dtype=np.float64)
+            lo = verts.min(axis=0) - BUCKET_M if len(verts) else np.zeros(2)
+            hi = verts.max(axis=0) + BUCKET_M if len(verts) else np.ones(2)
+            n = np.maximum(np.ceil((hi - lo) / BUCKET_M).astype(np.int64), 1)
+            grid = np.array([lo[0], lo[1], BUCKET_M, n[0], n[1]], dtype=np.float64)
+            tri = verts[self.triangles].reshape(-1, 3, 2)
+            a, b = self.seg_a.reshape(-1, 2), self.seg_b.reshape(-1, 2)
+            margin = 1e-4  # beyond rounding: a ray meets every wall it touches in the cells it walks
+            tstart, titems = _k.hash_boxes(tri.min(axis=1) - margin, tri.max(axis=1) + margin, lo, n, BUCKET_M)
+            sstart, sitems = _k.hash_boxes(np.minimum(a, b) - margin, np.maximum(a, b) + margin, lo, n, BUCKET_M)
+            prev, nxt = _ring_links(len(verts), self.segments)
+            e = self.vis_edges.reshape(-1, 2)
+            length = np.hypot(*(verts[self.reflex[e[:, 0]]] - verts[self.reflex[e[:, 1]]]).T)
+            adj = sparse.csr_matrix(
+                (np.r_[length, length], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                shape=(len(self.reflex),) * 2,
+            )
+            adj.sort_indices()
+            self._cache["kernel"] = {
+                "verts": verts,
+                "tris": np.ascontiguousarray(self.triangles, dtype=np.int64),
+                "va": np.ascontiguousarray(self.segments[:, 0], dtype=np.int64),
+                "vb": np.ascontiguousarray(self.segments[:, 1], dtype=np.int64),
+                "seg_tri": np.ascontiguousarray(self.seg_triangle, dtype=np.int64),
+                "seg_comp": np.ascontiguousarray(self.component[self.seg_triangle], dtype=np.int64),
+                "reflex": np.ascontiguousarray(self.reflex, dtype=np.int64),
+                "prev": prev,
+                "next": nxt,
+                "grid": grid,
+                "tstart": tstart,
+                "titems": titems,
+                "sstart": sstart,
+                "sitems": sitems,
+                "vptr": adj.indptr.astype(np.int64),
+                "vidx": adj.indices.astype(np.int64),
+                "vlen": adj.data.astype(np.float64),
             }
-        return self._cache["hash"]
-
-    def _bucket(self, points: np.ndarray, kind: str) -> np.ndarray:
-        h = self._hash()
-        ij = np.clip(np.floor((points - h["origin"]) / BUCKET_M).astype(np.int64), 0, h["n"] - 1)
-        return h[kind][ij[:, 1] * h["n"][0] + ij[:, 0]]
+            k = self._cache["kernel"]
+            comp = np.ascontiguousarray(self.component, dtype=np.int64)
+            names = ("verts", "tris", "seg_tri", "seg_comp", "va", "vb", "reflex", "prev", "next")
+            tail = ("grid", "tstart", "titems", "sstart", "sitems", "vptr", "vidx", "vlen")
+            self._cache["args"] = (*(k[n] for n in names), comp, *(k[n] for n in tail))
+        return self._cache["kernel"]
 
     @property
     def area(self) -> float:
@@ -284,43 +301,22 @@ class Navmesh:
         Returns:
             (N,) int64 triangle ids.
         """
-        points = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        cand = self._bucket(points, "tri")  # (N, K)
-        t = self.vertices[self.triangles[np.maximum(cand, 0)]]  # (N, K, 3, 2)
-        p = points[:, None, None, :]
-        e = np.roll(t, -1, axis=2) - t
-        length = np.maximum(np.linalg.norm(e, axis=-1), 1e-300)
-        side = _cross(e[..., 0], e[..., 1], p[..., 0] - t[..., 0], p[..., 1] - t[..., 1]) / length
-        inside = (side >= -tol).all(axis=-1) & (cand >= 0)
-        first = np.argmax(inside, axis=1)
-        return np.where(inside.any(axis=1), cand[np.arange(len(points)), first], -1)
+        k = self._kernel()
+        points = np.ascontiguousarray(np.atleast_2d(points), dtype=np.float64)
+        return _k.locate(points, float(tol), k["verts"], k["tris"], k["grid"], k["tstart"], k["titems"])
 
-    def nearest_boundary(self, points: np.ndarray, local: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def nearest_boundary(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest boundary point to each point.
 
         Args:
             points: (N, 2) float64, m.
-            local: only look at walls hashed near each point (for points within ~0.1 m of the mesh).
 
         Returns:
-            ``(closest (N, 2), distance (N,), segment id (N,))``.
+            ``(closest (N, 2), distance (N,), segment id (N,))``; the lowest segment id on ties.
         """
-        points = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        a, b = self.seg_a, self.seg_b
-        if local:
-            cand = self._bucket(points, "seg")
-            safe = np.maximum(cand, 0)
-            d = b[safe] - a[safe]
-            len2 = np.maximum((d**2).sum(-1), 1e-300)
-            t = np.clip(((points[:, None] - a[safe]) * d).sum(-1) / len2, 0.0, 1.0)
-            closest = a[safe] + t[..., None] * d
-            dist = np.where(cand >= 0, np.linalg.norm(points[:, None] - closest, axis=-1), np.inf)
-        else:
-            closest, dist = nearest_on_segments(points, a, b)
-            cand = np.broadcast_to(np.arange(len(a)), dist.shape)
-        k = np.argmin(dist, axis=1)
-        rows = np.arange(len(points))
-        return closest[rows, k], dist[rows, k], cand[rows, k]
+        k = self._kernel()
+        points = np.ascontiguousarray(np.atleast_2d(points), dtype=np.float64)
+        return _k.nearest_walls(points, k["va"], k["vb"], k["verts"])
 
     def nudge_inside(self, points: np.ndarray, segment: np.ndarray) -> np.ndarray:
         """Move boundary points NUDGE_M toward the centroid of their boundary edge's triangle."""
@@ -334,61 +330,47 @@ class Navmesh:
         Returns:
             ``(snapped (N, 2), triangle (N,) or -1 when farther than max_dist, distance moved (N,))``.
         """
-        points = np.atleast_2d(np.asarray(points, dtype=np.float64))
-        tri = self.locate(points)
-        out, moved = points.copy(), np.zeros(len(points))
-        off = np.flatnonzero(tri < 0)
-        if len(off) and len(self.segments):
-            closest, dist, seg = self.nearest_boundary(points[off])
-            near = dist <= max_dist
-            out[off] = np.where(near[:, None], self.nudge_inside(closest, seg), points[off])
-            moved[off] = np.where(near, dist, np.inf)
-            tri[off] = np.where(near, self.seg_triangle[seg], -1)
-        return out, tri, moved
+        k = self._kernel()
+        points = np.ascontiguousarray(np.atleast_2d(points), dtype=np.float64)
+        return _k.snap(
+            points,
+            float(max_dist),
+            k["verts"],
+            k["tris"],
+            k["seg_tri"],
+            k["va"],
+            k["vb"],
+            k["grid"],
+            k["tstart"],
+            k["titems"],
+        )
 
     def contains(self, points: np.ndarray, tol: float = 1e-6) -> np.ndarray:
         """(N,) bool: the point is on the mesh (within ``tol`` m of it)."""
         points = np.atleast_2d(np.asarray(points, dtype=np.float64))
         inside = self.locate(points) >= 0
-        if (~inside).any():
+        if (~inside).any() and len(self.segments):
             _, dist, _ = self.nearest_boundary(points[~inside])
             inside[~inside] = dist <= tol
         return inside
 
-    def segment_clear(self, p: np.ndarray, q: np.ndarray, chunk: int = 200_000) -> np.ndarray:
+    def segment_clear(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
         """(N,) bool: the segments p→q (points on the mesh) stay on the mesh (touching walls is allowed).
 
         Args:
             p: (N, 2) float64 segment starts, m.
             q: (N, 2) float64 segment ends, m.
-            chunk: segments tested per batch (bounds the temporary arrays).
         """
-        p, q = np.atleast_2d(p).astype(np.float64), np.atleast_2d(q).astype(np.float64)
-        d = q - p
-        n = np.linalg.norm(d, axis=1, keepdims=True)
-        u = d / np.maximum(n, 1e-300)
-        s = np.minimum(SHORTEN_M, 0.5 * n)
-        p2, q2 = p + u * s, q - u * s
-        a, b = self.seg_a, self.seg_b
-        out = np.ones(len(p), dtype=bool)
-        step = max(1, chunk // max(1, len(a)))
-        for i in range(0, len(p), step):
-            # bounding-box prefilter, then the exact test on the few walls that can be hit
-            lo = np.minimum(p2[i : i + step], q2[i : i + step])
-            hi = np.maximum(p2[i : i + step], q2[i : i + step])
-            near = (
-                (np.minimum(a, b)[None] <= hi[:, None]).all(-1) & (np.maximum(a, b)[None] >= lo[:, None]).all(-1)
-            ).any(axis=0)
-            if near.any():
-                hit = segments_blocked(p2[i : i + step, None], q2[i : i + step, None], a[near][None], b[near][None])
-                out[i : i + step] = ~hit.any(axis=1)
-        return out
+        k = self._kernel()
+        p = np.ascontiguousarray(np.atleast_2d(p), dtype=np.float64)
+        q = np.ascontiguousarray(np.broadcast_to(np.atleast_2d(q), p.shape), dtype=np.float64)
+        return _k.segments_clear(p, q, k["va"], k["vb"], k["verts"], k["grid"], k["sstart"], k["sitems"])
 
     def constrain_moves(self, pos: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Keep short moves on the mesh (DetourCrowd's move along the surface).
 
         A move whose segment leaves the mesh ends at the nearest mesh point to its target instead
-        (sliding along the wall). Moves are expected to be short (≲ 0.1 m).
+        (sliding along the wall).
 
         Args:
             pos: (N, 2) float64 current positions on the mesh, m.
@@ -397,16 +379,12 @@ class Navmesh:
         Returns:
             (N, 2) float64 positions on the mesh.
         """
-        cand = self._bucket(pos, "seg")
-        safe = np.maximum(cand, 0)
-        a, b = self.seg_a[safe], self.seg_b[safe]  # (N, K, 2)
-        hit = segments_blocked(pos[:, None], target[:, None], a, b)
-        bad = np.flatnonzero((hit & (cand >= 0)).any(axis=1))
-        out = target.copy()
-        if len(bad):
-            closest, _, seg = self.nearest_boundary(target[bad], local=True)
-            out[bad] = self.nudge_inside(closest, seg)
-        return out
+        k = self._kernel()
+        pos = np.ascontiguousarray(pos, dtype=np.float64)
+        target = np.ascontiguousarray(target, dtype=np.float64)
+        return _k.constrain_moves(
+            pos, target, k["va"], k["vb"], k["verts"], k["tris"], k["seg_tri"], k["grid"], k["sstart"], k["sitems"]
+        )
 
     # ---- paths ----------------------------------------------------------------------------------
     def corridor(self, start_tri: int, goal_tri: int, start: np.ndarray, goal: np.ndarray) -> list[int] | None:
@@ -455,54 +433,20 @@ class Navmesh:
         empty = np.zeros((0, 2))
         return funnel(np.array(left) if left else empty, np.array(right) if right else empty, start, goal)
 
-    def _tangent(self, vids: np.ndarray, other: np.ndarray) -> np.ndarray:
-        """(N,) bool: the line from reflex vertex ``vids`` to ``other`` (N, 2) leaves both of its walls on one side."""
-        prev, nxt = self._cache.get("prev"), self._cache.get("next")
-        if prev is None:
-            prev = np.full(len(self.vertices), -1)
-            nxt = np.full(len(self.vertices), -1)
-            nxt[self.segments[:, 0]] = self.segments[:, 1]
-            prev[self.segments[:, 1]] = self.segments[:, 0]
-            self._cache["prev"], self._cache["next"] = prev, nxt
-        v = self.vertices[vids]
-        d = other - v
-        s1 = _cross(*d.T, *(self.vertices[prev[vids]] - v).T)
-        s2 = _cross(*d.T, *(self.vertices[nxt[vids]] - v).T)
-        s1[np.abs(s1) < TOUCH_EPS] = 0.0
-        s2[np.abs(s2) < TOUCH_EPS] = 0.0
-        return s1 * s2 >= 0.0
-
-    def _visible_reflex(self, point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Reflex positions visible from ``point`` along tangent lines, and their distances."""
-        v = self.vertices[self.reflex]
-        ok = self._tangent(self.reflex, np.broadcast_to(point, v.shape))
-        idx = np.flatnonzero(ok)
-        if len(idx):
-            idx = idx[self.segment_clear(np.broadcast_to(point, (len(idx), 2)), v[idx])]
-        return idx, np.linalg.norm(v[idx] - point, axis=1)
-
     def shortest_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
-        """The true shortest path between two points of one mesh part (reduced visibility graph)."""
+        """The true shortest path (K, 2) between two points of one mesh part, or None.
+
+        A compiled A* over the reduced visibility graph (shortest paths bend only at reflex vertices).
+        """
+        k = self._kernel()
         start, goal = np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64)
-        if self.segment_clear(start[None], goal[None])[0]:
-            return np.array([start, goal])
-        r = len(self.reflex)
-        si, sd = self._visible_reflex(start)
-        gi, gd = self._visible_reflex(goal)
-        e = self.vis_edges
-        w = np.linalg.norm(self.vertices[self.reflex[e[:, 0]]] - self.vertices[self.reflex[e[:, 1]]], axis=1)
-        rows = np.concatenate([e[:, 0], e[:, 1], np.full(len(si), r), gi])
-        cols = np.concatenate([e[:, 1], e[:, 0], si, np.full(len(gi), r + 1)])
-        data = np.concatenate([w, w, sd, gd])
-        graph = sparse.csr_matrix((np.maximum(data, 1e-12), (rows, cols)), shape=(r + 2, r + 2))
-        dist, pred = csgraph.dijkstra(graph, directed=True, indices=r, return_predecessors=True)
-        if not np.isfinite(dist[r + 1]):
+        bends = _k.shortest_path(
+            start[0], start[1], goal[0], goal[1], k["reflex"], k["verts"], k["prev"], k["next"], k["va"], k["vb"],
+            k["grid"], k["sstart"], k["sitems"], k["vptr"], k["vidx"], k["vlen"],
+        )  # fmt: skip
+        if len(bends) == 1 and bends[0] < 0:
             return None
-        chain = [r + 1]
-        while pred[chain[-1]] >= 0:
-            chain.append(int(pred[chain[-1]]))
-        nodes = np.array(chain[::-1][1:-1], dtype=np.int64)
-        return np.vstack([start, self.vertices[self.reflex[nodes]], goal])
+        return np.vstack([start, self.vertices[self.reflex[bends]], goal])
 
     def find_path(
         self, start: np.ndarray, goal: np.ndarray, max_snap: float = 0.5, allow_partial: bool = True
@@ -516,30 +460,54 @@ class Navmesh:
             allow_partial: when the goal is in another mesh part, return a path to the point of the
                 start's part nearest to the goal (status ``partial``) instead of ``unreachable``.
         """
-        none = np.zeros((0, 2))
-        ends, tri, moved = self.snap(np.array([start, goal], dtype=np.float64), max_snap)
-        if (tri < 0).any():
-            which = "start" if tri[0] < 0 else "goal"
-            return PathResult("off_mesh", none, float("inf"), f"{which} is more than {max_snap} m from the mesh")
-        status, reason = "ok", ""
-        if self.component[tri[0]] != self.component[tri[1]]:
-            if not allow_partial:
-                return PathResult("unreachable", none, float("inf"), "goal is on another part of the mesh")
-            mine = self.component[self.seg_triangle] == self.component[tri[0]]
-            closest, dist = nearest_on_segments(ends[1:], self.seg_a[mine], self.seg_b[mine])
-            k = int(np.argmin(dist[0]))
-            ends[1] = self.nudge_inside(closest[0, k][None], np.flatnonzero(mine)[k : k + 1])[0]
-            tri[1] = self.seg_triangle[np.flatnonzero(mine)[k]]
-            status, reason = "partial", "goal is on another part of the mesh"
-        best = self.shortest_path(ends[0], ends[1])
-        corridor = self.corridor(int(tri[0]), int(tri[1]), ends[0], ends[1])
-        if corridor is not None:
-            pulled = self.funnel_path(corridor, ends[0], ends[1])
-            if best is None or polyline_length(pulled) < polyline_length(best) - 1e-9:
-                best = pulled
-        if best is None:  # cannot happen for one mesh part; kept so that a query never raises
-            return PathResult("unreachable", none, float("inf"), "no corridor between start and goal")
-        return PathResult(status, best, polyline_length(best), reason)
+        if "args" not in self._cache:
+            self._kernel()
+        code, points, length = _k.find_path(
+            float(start[0]),
+            float(start[1]),
+            float(goal[0]),
+            float(goal[1]),
+            float(max_snap),
+            bool(allow_partial),
+            self._cache["args"],
+        )
+        if code in (_k.OK, _k.PARTIAL):
+            reason = "" if code == _k.OK else "goal is on another part of the mesh"
+            return PathResult("ok" if code == _k.OK else "partial", points, length, reason)
+        reason = {
+            _k.START_OFF: f"start is more than {max_snap} m from the mesh",
+            _k.GOAL_OFF: f"goal is more than {max_snap} m from the mesh",
+            _k.UNREACHABLE: "goal is on another part of the mesh",
+            _k.NO_PATH: "no path between start and goal",  # cannot happen within one mesh part
+        }[code]
+        status = "off_mesh" if code in (_k.START_OFF, _k.GOAL_OFF) else "unreachable"
+        return PathResult(status, np.zeros((0, 2)), float("inf"), reason)
+
+    def distances(self, source: np.ndarray, goals: np.ndarray, max_snap: float = 0.5) -> np.ndarray:
+        """Shortest-path lengths (m) from one point to many: one search over the visibility graph.
+
+        Args:
+            source: (2,) float64, m.
+            goals: (N, 2) float64, m.
+            max_snap: farthest an end may be from the mesh, m (the snap is not counted in the length).
+
+        Returns:
+            (N,) float64; inf where the goal is off the mesh or on another part of it.
+        """
+        goals = np.atleast_2d(np.asarray(goals, dtype=np.float64)).reshape(-1, 2)
+        out = np.full(len(goals), np.inf)
+        src, stri, _ = self.snap(np.asarray(source, dtype=np.float64)[None], max_snap)
+        dst, gtri, _ = self.snap(goals, max_snap)
+        if stri[0] < 0:
+            return out
+        ok = (gtri >= 0) & (self.component[np.maximum(gtri, 0)] == self.component[stri[0]])
+        if ok.any():
+            k = self._kernel()
+            out[ok] = _k.distances_from(
+                src[0, 0], src[0, 1], np.ascontiguousarray(dst[ok]), k["reflex"], k["verts"], k["prev"], k["next"],
+                k["va"], k["vb"], k["grid"], k["sstart"], k["sitems"], k["vptr"], k["vidx"], k["vlen"],
+            )  # fmt: skip
+        return out
 
 
 # ---- build ----------------------------------------------------------------------------------------
@@ -591,16 +559,23 @@ def _polygon_parts(geometry) -> list:
     return [part for child in getattr(geometry, "geoms", []) for part in _polygon_parts(child)]
 
 
-def simplify_polygons(polys: list, error: float, min_area: float = 0.0) -> list:
-    """Douglas–Peucker at ε/2, then an inward mitred offset of ε/2: the result stays inside ``polys``.
+def simplify_polygons(polys: list, error: float, min_area: float = 0.0, margin: float = 0.0) -> list:
+    """Douglas–Peucker at ε/2, then an inward mitred offset of max(ε/2 − margin, 0) + OFFSET_SLACK_M.
+
+    ``margin`` is how far the input rings run inside the region the result must stay in (the traced
+    rings run ¼ cell inside the legal cells' edges). Douglas–Peucker moves the boundary at most ε/2
+    outward, so the offset keeps the result inside that region while cutting passages no more than
+    needed (offsetting by the full ε/2 cut diagonal passages two cells wide that the grid keeps).
 
     Returns counter-clockwise polygons (holes clockwise) larger than ``min_area`` m².
     """
     from shapely.geometry.polygon import orient
 
+    offset = max(0.5 * error - margin, 0.0) + OFFSET_SLACK_M
     out = []
     for poly in polys:
-        shape = poly.simplify(0.5 * error, preserve_topology=True).buffer(-0.5 * error, join_style="mitre")
+        shape = poly.simplify(0.5 * error, preserve_topology=True)
+        shape = shape.buffer(-offset, join_style="mitre")
         out.extend(orient(g, 1.0) for g in getattr(shape, "geoms", [shape]) if g.area > max(min_area, 0.0))
     return sorted(out, key=lambda g: (round(g.bounds[0], 9), round(g.bounds[1], 9)))
 
@@ -628,7 +603,7 @@ def _triangulate(polys: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = vertices[triangles]
     area = _cross(*(t[:, 1] - t[:, 0]).T, *(t[:, 2] - t[:, 0]).T)
     triangles[area < 0] = triangles[area < 0][:, ::-1]
-    triangles = triangles[np.abs(area) > 1e-14]
+    triangles = _k.split_t_junctions(vertices, triangles[np.abs(area) > 1e-14], T_JUNCTION_M)
     return vertices, triangles, np.vstack(segs)
 
 
@@ -645,12 +620,18 @@ def _adjacency(triangles: np.ndarray, n_vertices: int) -> np.ndarray:
     return nb.reshape(-1, 3)
 
 
-def _reflex(vertices: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Boundary vertices where the mesh turns right (interior angle > 180°), sorted ids."""
-    nxt = np.full(len(vertices), -1)
-    prev = np.full(len(vertices), -1)
+def _ring_links(n_vertices: int, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(prev, next)`` (V,) int64: each boundary vertex's neighbours along its ring (-1 off the boundary)."""
+    prev = np.full(n_vertices, -1, dtype=np.int64)
+    nxt = np.full(n_vertices, -1, dtype=np.int64)
     nxt[segments[:, 0]] = segments[:, 1]
     prev[segments[:, 1]] = segments[:, 0]
+    return prev, nxt
+
+
+def _reflex(vertices: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Boundary vertices where the mesh turns right (interior angle > 180°), sorted ids."""
+    prev, nxt = _ring_links(len(vertices), segments)
     ids = segments[:, 0]
     d0 = vertices[ids] - vertices[prev[ids]]
     d1 = vertices[nxt[ids]] - vertices[ids]
@@ -658,16 +639,18 @@ def _reflex(vertices: np.ndarray, segments: np.ndarray) -> np.ndarray:
 
 
 def _visibility_edges(mesh: Navmesh) -> np.ndarray:
-    """(E, 2) pairs (i < j) of reflex positions joined by a bitangent segment that stays on the mesh."""
-    r = len(mesh.reflex)
-    if r < 2:
+    """(E, 2) pairs (i < j) of reflex positions joined by a bitangent segment that stays on the mesh.
+
+    All reflex pairs are tried, but a pair costs two cross products unless it is bitangent, and a
+    ray walks only the hash cells it crosses until its first wall, so the build grows about with the
+    scene's area (not with its square, as a test of every pair against every wall did).
+    """
+    if len(mesh.reflex) < 2:
         return np.zeros((0, 2), np.int64)
-    i, j = np.triu_indices(r, k=1)
-    vi, vj = mesh.reflex[i], mesh.reflex[j]
-    ok = mesh._tangent(vi, mesh.vertices[vj]) & mesh._tangent(vj, mesh.vertices[vi])
-    i, j = i[ok], j[ok]
-    clear = mesh.segment_clear(mesh.vertices[mesh.reflex[i]], mesh.vertices[mesh.reflex[j]])
-    return np.stack([i[clear], j[clear]], -1).astype(np.int64)
+    k = mesh._kernel()
+    return _k.visibility_edges(
+        k["reflex"], k["verts"], k["prev"], k["next"], k["va"], k["vb"], k["grid"], k["sstart"], k["sitems"]
+    )
 
 
 def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
@@ -699,7 +682,9 @@ def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
         if lost.any():  # a sliver: fall back to the nearest triangle centroid
             centroid = vertices[triangles].mean(axis=1)
             mesh.seg_triangle[lost] = np.argmin(((probe[lost, None] - centroid[None]) ** 2).sum(-1), axis=1)
+    mesh._cache.clear()
     mesh.vis_edges = _visibility_edges(mesh)
+    mesh._cache.clear()  # the kernel arrays hold the visibility graph: rebuild them on first use
     return mesh
 
 
@@ -722,7 +707,8 @@ def build_navmesh(
         (int(legal.shape[0]), int(legal.shape[1])),
         float(contour_error),
     )
-    polys = simplify_polygons(trace_legal(legal, resolution, origin), contour_error, min_area=resolution**2)
+    traced = trace_legal(legal, resolution, origin)
+    polys = simplify_polygons(traced, contour_error, min_area=resolution**2, margin=0.25 * resolution)
     return navmesh_from_polygons(polys, params)
 
 
