@@ -43,7 +43,7 @@ demo: setup
 	$(SONG) viz scene $(SCENES)/procthor_house_6 --out $(FIGURES)/scene.png
 	$(SONG) viz crowd $(RUN) --scene procthor_house_6 --out $(FIGURES)
 	$(SONG) viz episode $(BENCH) --episode procthor_house_6-001 --results $(EVAL)/social.parquet --out $(FIGURES)
-	$(SONG) viz avatar --out $(FIGURES)/avatars.png --count 6
+	$(SONG) viz avatar --out $(FIGURES)/avatars.png --count 6 --gallery $(FIGURES)/avatar_gallery.png
 	$(SONG) viz pov $(BENCH) --episode procthor_house_6-001 --policy depth --out $(FIGURES)
 	$(SONG) viz view $(SCENES)/procthor_house_6 --out $(FIGURES)/procthor_house_6-view.png
 	@echo "results: $(EVAL)/results.md  figures: $(FIGURES)/"

@@ -126,8 +126,8 @@ class MotionConfig(_Section):
 class BindingConfig(_Section):
     """Avatar pool and LBS caches (paper: motion and avatar binding)."""
 
-    n_gaussians: int = Field(20_000, ge=5_000, le=100_000, description="Gaussians per procedural avatar")
-    pool_size: int = Field(32, ge=1, description="identities in the default (generated, cached) avatar pool")
+    n_gaussians: int = Field(40_000, ge=5_000, le=100_000, description="Gaussians per procedural avatar")
+    pool_size: int = Field(128, ge=1, description="identities in the default (generated, cached) avatar pool")
     pool_seed: int = Field(0, description="seed of the default avatar pool")
     avatars_dir: str = Field(
         "", description="folder of *.avatar.npz assets to bind (empty: the default pool under $SONG_CACHE_DIR)"

@@ -29,9 +29,9 @@ def _row(asset) -> dict:
 @handle_errors
 def build(
     out: Path = typer.Option(..., "--out", help="pool folder to write *.avatar.npz into"),
-    count: int = typer.Option(32, "--count", min=1, help="identities"),
+    count: int = typer.Option(128, "--count", min=1, help="identities"),
     seed: int = typer.Option(0, "--seed", help="pool seed (avatar i depends only on seed and i)"),
-    gaussians: int = typer.Option(20_000, "--gaussians", min=5_000, max=100_000, help="Gaussians per avatar"),
+    gaussians: int = typer.Option(40_000, "--gaussians", min=5_000, max=100_000, help="Gaussians per avatar"),
 ) -> None:
     """Generate procedural identities (parametric body, clothing, hair, skin tone)."""
     from song.datasets.avatars import load_avatar
@@ -51,6 +51,9 @@ def import_command(
     height: float = typer.Option(1.75, "--height", min=0.5, max=2.5, help="body height to scale to, m"),
     up: str = typer.Option(None, "--up", help="source up axis, e.g. +y (detected when omitted)"),
     forward: str = typer.Option(None, "--forward", help="source forward axis, e.g. +z (detected when omitted)"),
+    force: bool = typer.Option(
+        False, "--force", help="import a splat that does not look like a person (needs --up/--forward)"
+    ),
 ) -> None:
     """Import a real Gaussian avatar (e.g. an LHM export): orient, ground, scale, skin, validate."""
     from song.datasets.avatars import save_avatar
@@ -58,6 +61,6 @@ def import_command(
     from song.util import check_id
 
     avatar_id = check_id(avatar_id or ply.name.split(".")[0], "--id")  # before any work: it names a file
-    asset = import_ply_avatar(ply, avatar_id, height, up, forward)
+    asset = import_ply_avatar(ply, avatar_id, height, up, forward, force=force)
     path = save_avatar(asset, out)
     console.print(f"wrote {path}: {len(asset):,} Gaussians, {asset.height_m:.2f} m")

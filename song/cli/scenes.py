@@ -29,11 +29,19 @@ def _spacing(value: float | None) -> float:
 @scenes_app.command("check")
 @handle_errors
 def check(folder: Path = typer.Argument(..., help="a scene package, or a folder of them")) -> None:
-    """Validate scene packages: a status table, then one line per failed package; exit 1 if any fails."""
+    """Validate scene packages: a status table, then one line per problem; exit 1 if any package fails.
+
+    A package passes when it is well formed and synthesis can use it: enough walkable area for a
+    pedestrian of the default radius, two connected standing spots, objects one can stand next to.
+    Unreachable objects alone are a warning (those objects are skipped).
+    """
+    from song.config import SongConfig
     from song.datasets.scenes import find_scene_packages, load_scene_package
     from song.datasets.scenes.ply import check_gaussian_ply
+    from song.pipeline.intents.navigation import usability_problems
 
-    rows, problems = [], []
+    crowd = SongConfig().crowd
+    rows, problems, warnings = [], [], []
     for root in find_scene_packages(folder):
         try:
             package = load_scene_package(root)
@@ -43,6 +51,10 @@ def check(folder: Path = typer.Argument(..., help="a scene package, or a folder 
             continue
         smap = package.semantic_map
         ply, usd = package.gaussians_path, package.usd_path
+        found = usability_problems(package, crowd.agent_radius_m, crowd.contour_error_m)
+        fatal = [p for p in found if "cannot be reached on foot:" not in p]
+        problems += [(root.name, p) for p in fatal]
+        warnings += [(root.name, p) for p in found if p not in fatal]
         rows.append(
             {
                 "scene": smap.scene_id,
@@ -52,7 +64,7 @@ def check(folder: Path = typer.Argument(..., help="a scene package, or a folder 
                 "obj": len(smap.objects),
                 "splats": f"{check_gaussian_ply(ply):,}" if ply else "-",
                 "usd": "yes" if usd else "-",
-                "status": "ok",
+                "status": "unusable" if fatal else "ok",
             }
         )
     columns = ["scene", "venue", "source", "size m", "obj", "splats", "usd", "status"]
@@ -62,7 +74,9 @@ def check(folder: Path = typer.Argument(..., help="a scene package, or a folder 
     console.print(table)
     for name, message in problems:  # whole, unwrapped lines: easy to grep and copy
         console.print(f"[red]FAILED[/red] {name}: {message}", soft_wrap=True)
-    failed = len(problems)
+    for name, message in warnings:
+        console.print(f"[yellow]warning[/yellow] {name}: {message}", soft_wrap=True)
+    failed = len({name for name, _ in problems})
     console.print(f"{len(rows) - failed} ok, {failed} failed" if rows else f"no scene packages found in {folder}")
     if failed or not rows:
         raise typer.Exit(1)

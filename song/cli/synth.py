@@ -73,6 +73,11 @@ def run_chain_command(
             tasks = {name: progress.add_task(name, total=total, failed=0) for name in names}
             for result in iterator:
                 results.append(result)
+                if result.totals.get("llm_fallbacks"):  # never silent: say which scene, where the reason is
+                    progress.console.print(
+                        f"[yellow]{result.scene_id}: the LLM failed, the offline model stood in "
+                        f"(llm_error in scenes/{result.scene_id}/intents.json)[/yellow]"
+                    )
                 for name in names:
                     status = result.stages.get(name)
                     failed = progress.tasks[tasks[name]].fields["failed"] + (status == "failed")
@@ -99,6 +104,10 @@ def _print_summary(summary: RunSummary, wall: float, out: Path, quiet: bool, fps
         rows = [{"scene": scene, "status": "failed", "error": error} for scene, error in summary.failed]
         console.print(status_table("failed scenes", rows, ["scene", "status", "error"]))
     counts = summary.scenes
+    if summary.totals.get("llm_fallbacks"):
+        console.print(
+            f"[yellow]LLM fallbacks: {summary.totals['llm_fallbacks']} scenes used the offline model[/yellow]"
+        )
     console.print(
         f"scenes: {counts['ok']} ok, {counts['skipped']} unchanged, {counts['failed']} failed in {wall:.1f} s wall; "
         f"{peds} pedestrians, {frames} pedestrian-frames at {fps} FPS; "

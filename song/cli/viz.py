@@ -118,6 +118,7 @@ def avatar(
     avatars: Path = typer.Option(None, "--avatars", help="pool folder of *.avatar.npz (default: the default pool)"),
     out: Path = typer.Option(Path("avatars.png"), "--out", help="PNG path"),
     count: int = typer.Option(5, "--count", min=1, help="identities to show"),
+    gallery: Path = typer.Option(None, "--gallery", help="also render them with a robot camera at 2 m and 5 m (PNG)"),
 ) -> None:
     """Splat preview of a few identities: front and side, rest pose and mid-stride."""
     from song.config import BindingConfig
@@ -129,4 +130,9 @@ def avatar(
     assets = [load_avatar(path) for path in paths[:count]]
     if not assets:
         raise typer.BadParameter(f"{avatars}: no *.avatar.npz here")
-    _report([draw_avatars(assets, out, pose=mid_stride)])
+    written = [draw_avatars(assets, out, pose=mid_stride)]
+    if gallery:
+        from song.viz.avatar import render_gallery
+
+        written.append(render_gallery(assets, gallery))
+    _report(written)

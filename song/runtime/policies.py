@@ -155,7 +155,7 @@ class SocialPolicy:
 
     sensors = ("state", "pedestrians")
 
-    def __init__(self, horizon: float = 2.0, dt: float = 0.1, safety: float = 0.12) -> None:
+    def __init__(self, horizon: float = 2.0, dt: float = 0.1, safety: float = 0.2) -> None:
         self.horizon, self.dt, self.safety = horizon, dt, safety
 
     def reset(self, episode: Episode) -> None:

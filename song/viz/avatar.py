@@ -90,3 +90,49 @@ def mid_stride(asset: AvatarAsset) -> np.ndarray:
     f = int(np.argmax(np.abs(motion.joints[:, 7, 0] - motion.joints[:, 8, 0])[30:])) + 30  # feet furthest apart
     transforms = skinning_transforms(rest, motion.local_quats[f], motion.root_pos[f] * scale)
     return lbs_positions(skin_asset(asset), transforms.astype(np.float32))
+
+
+def render_gallery(
+    assets: Sequence[AvatarAsset],
+    out: str | Path,
+    distances: Sequence[float] = (2.0, 5.0),
+    camera_height_m: float = 0.8,
+    size: tuple[int, int] = (640, 400),
+    hfov_deg: float = 70.0,
+) -> Path:
+    """Write a PNG of identities as a robot sees them: the real renderer, a robot camera at each distance.
+
+    The identities stand side by side (0.75 m apart, mid-stride when the pose is available, facing the
+    camera) on a light floor-less background; one panel per distance, left to right.
+    """
+    import cv2
+
+    from song.render import GaussianSet, look_at, render
+
+    sets = []
+    spacing = 0.75
+    for k, asset in enumerate(assets):
+        cloud = asset.gaussians
+        means = mid_stride(asset).astype(np.float64)
+        means -= np.array([means[:, 0].mean(), means[:, 1].mean(), 0.0])
+        means = means @ np.diag([-1.0, -1.0, 1.0])  # turn to face −x, towards the camera
+        means[:, 1] += (k - (len(assets) - 1) / 2) * spacing
+        q = cloud.quats  # the same turn for the discs: (0, 0, 0, 1) ⊗ (w, x, y, z) = (−z, −y, x, w)
+        quats = np.column_stack([-q[:, 3], -q[:, 2], q[:, 1], q[:, 0]])
+        sets.append(GaussianSet.from_raw(means, quats, cloud.log_scales, cloud.opacity_logits, cloud.sh_dc))
+    panels = []
+    for d in distances:
+        eye = np.array([-d, 0.0, camera_height_m])
+        camera = look_at(eye, np.array([0.0, 0.0, 0.9]), size[0], size[1], hfov_deg)
+        rgb = render(sets, camera, backend="numba", background=(0.93, 0.93, 0.91)).rgb
+        panel = np.ascontiguousarray(rgb)
+        cv2.putText(
+            panel, f"robot camera at {d:g} m", (10, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (40, 40, 40), 1, cv2.LINE_AA
+        )
+        panels.append(panel)
+    image = np.concatenate(panels, axis=1)
+    ok, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise RuntimeError(f"{out}: PNG encoding failed")
+    write_bytes_atomic(out, data.tobytes())
+    return Path(out)

@@ -125,3 +125,18 @@ def test_spacing_help_names_the_real_default() -> None:
     code, out = _invoke(["scenes", "generate", "--help"])
     words = [w for w in out.replace("│", " ").split() if w]  # rich wraps help text inside a box
     assert code == 0 and f"(default {SURFEL_SPACING_M:g})" in " ".join(words)
+
+
+def test_an_llm_fallback_is_printed_per_scene_and_in_the_summary(tmp_path) -> None:
+    """``--llm openai`` with no server: the offline model stands in, and the run says so (never silent)."""
+    import shutil
+
+    scenes = tmp_path / "scenes"
+    shutil.copytree(SAMPLES / "shop_0003", scenes / "shop_0003")
+    args = ["synth", "--scenes", str(scenes), "--out", str(tmp_path / "run"), "--stages", "intents"]
+    args += ["--set", "intents.llm=openai", "--set", "intents.openai_base_url=http://127.0.0.1:9/v1"]
+    args += ["--set", "intents.max_retries=1", "--set", "intents.backoff_base_s=0.01", "--set", "intents.timeout_s=1"]
+    code, out = _invoke(args)
+    assert code == 0, out
+    assert "shop_0003: the LLM failed, the offline model stood in" in out
+    assert "LLM fallbacks: 1 scenes used the offline model" in out

@@ -47,9 +47,10 @@ def test_grading_means_something(tmp_path: Path) -> None:
     """Full chain with real avatars (motion + binding, Gaussians posed by LBS) on the three ProcTHOR houses,
     ≥ 100 episodes: social ≥ 80 % on easy and above straight; SR(easy) ≥ SR(hard) for every baseline.
 
-    (83.3 % measured since episodes guarantee a walking pedestrian near the path and pedestrians walk
-    60 s routines: the failures are head-on passes in narrow corridors, where pedestrians, who do not
-    react to the robot as in the paper, walk into it.)"""
+    (81.3 % measured with the social planner's 0.2 m safety margin, 79.2 % with the former 0.12 m, since
+    episodes guarantee a walking pedestrian near the path and pedestrians walk 60 s routines: the
+    failures are head-on passes in narrow corridors, where pedestrians, who do not react to the robot
+    as in the paper, walk into it.)"""
     from song.config import SongConfig
     from song.pipeline.chain import iter_run
 

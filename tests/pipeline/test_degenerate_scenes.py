@@ -79,3 +79,29 @@ def test_the_reason_for_no_pedestrians_is_recorded(degenerate_run) -> None:
     for scene in ("no_objects", "narrow_strips"):
         intents = read_intents(run / "scenes" / scene)
         assert not intents.intents and intents.notes, intents
+
+
+def test_scenes_check_reports_every_usability_problem(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from song.cli import app
+    from song.datasets.scenes import load_scene_package
+    from song.pipeline.intents.navigation import usability_problems
+
+    scenes = tmp_path / "scenes"
+    strips = [(0.0, y + 0.4, 12.0, y + 0.6) for y in np.arange(0.0, 3.0, 0.6)]
+    _package(scenes, "narrow_strips", 12.0, 3.2, [], strips)  # no body fits, no objects: two problems
+    buried = _desk("desk_1", 3.0, 2.0)
+    _package(scenes, "buried", 8.0, 5.0, [buried], [(2.6, 1.6, 4.4, 3.0)])  # the desk inside a wall block
+    _package(scenes, "fine", 8.0, 5.0, [_desk("desk_1", 2.0, 2.0), _desk("desk_2", 5.0, 1.0)])
+    problems = {p.name: usability_problems(load_scene_package(p), 0.25, 0.05) for p in sorted(scenes.iterdir())}
+    assert problems["fine"] == []
+    assert len(problems["narrow_strips"]) == 2  # no walkable area, no objects
+    assert any("walkable area" in p for p in problems["narrow_strips"])
+    assert any("objects: none" in p for p in problems["narrow_strips"])
+    assert problems["buried"] == ["no object can be reached on foot (1 objects in walls or cut off)"]
+    result = CliRunner().invoke(app, ["scenes", "check", str(scenes)])
+    assert result.exit_code == 1
+    lines = [line for line in result.output.splitlines() if line.startswith("FAILED")]
+    assert len(lines) == 3 and sum("narrow_strips" in line for line in lines) == 2
+    assert "1 ok, 2 failed" in result.output

@@ -1,14 +1,21 @@
-"""Procedural Gaussian avatars: a parametric body with clothing, hair and skin tone (DESIGN §5.4).
+"""Procedural Gaussian avatars: anthropometric bodies with faces, hands, hair and shaded clothing (DESIGN §5.4).
 
 The body is a set of surfaces around the bones of :func:`song.geometry.skeleton.rest_joints` in the
-T-pose — tapered elliptic tubes for the torso and limbs, ellipsoids for the head, hands and feet —
-whose radii follow the height and a girth factor. Gaussians are flat discs on those surfaces (the
-normal is the thin axis), their number split between parts in proportion to area so the surface is
-evenly covered. Clothing and hair colour the discs by region (tops with short or long sleeves,
-trousers, shorts, skirts, dresses with a cone from the waist; solid, striped or two-tone; hair caps,
-long hair, buns, ponytails) and add the extra surfaces skirts and hair need. Skinning weights come from
-:func:`transfer_weights`, except skirts and dresses, which hang from the pelvis and follow the hips
-towards the hem.
+T-pose — tapered elliptic tubes for the torso, limbs and fingers, ellipsoids for the head, nose, ears,
+palms, feet and the caps that close the shoulder and hip joints (no seams there) — sized from the
+identity's measurements (:mod:`song.datasets.avatars.anthropometry`: stature, shoulder and hip breadth,
+chest depth per sex and age group). Gaussians are flat discs on those surfaces (the normal is the thin
+axis), their number split between parts in proportion to area (the head and hands denser, so the face
+and fingers resolve).
+
+Looks (:func:`_colours`): skin with smooth tone variation, a face (eyes with sclera and iris, brows,
+lips, nose and cheeks shaded), hair as a shell with volume in several styles, clothing by region (tops
+with short or long sleeves or tanks; trousers, shorts, skirts, dresses) in cotton, knit or denim
+textures with folds at the elbows and knees, side seams and hems baked in as shading, shoes with soles,
+sometimes glasses, a shoulder bag or a lanyard; then a soft key light from above and in front baked into
+the colours (degree-0 colours are what a splat renderer shows from every side, so form comes from this
+shading). Skinning weights come from :func:`transfer_weights`, except what hangs from the pelvis (skirts,
+dresses, bags), which follows the hips.
 
 Every parameter is drawn from the avatar's own generator (``derive_rng(seed, "avatar", index)``), so
 avatar ``i`` of a pool does not depend on the pool's size, and the same seed gives identical files.
@@ -22,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from song.datasets.avatars.anthropometry import Body, sample_body
 from song.datasets.avatars.asset import AvatarAsset, save_avatar
 from song.datasets.avatars.skinning import top_k, transfer_weights
 from song.datasets.scenes.ply import SH_C0, GaussianCloud
@@ -30,7 +38,7 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import N_JOINTS, rest_joints
 from song.util import derive_rng
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 SKIN_TONES = np.array(  # sRGB 0–1, light to deep (a spread of real skin reflectances)
     [
         [0.96, 0.84, 0.74],
@@ -51,10 +59,17 @@ HAIR_COLOURS = np.array(
         [0.62, 0.62, 0.6],
     ]
 )
+EYE_COLOURS = np.array([[0.22, 0.13, 0.07], [0.35, 0.24, 0.12], [0.25, 0.38, 0.5], [0.3, 0.4, 0.28]])
+DENIM = np.array([[0.16, 0.22, 0.38], [0.24, 0.33, 0.52], [0.38, 0.47, 0.62], [0.12, 0.13, 0.16]])
 TOPS = ("tshirt", "longsleeve", "tank")
 BOTTOMS = ("trousers", "shorts", "skirt")
 PATTERNS = ("solid", "stripes", "two_tone")
-HAIR = ("short", "long", "bun", "ponytail", "bald")
+FABRICS = ("cotton", "knit", "denim")
+HAIR = ("short", "long", "bun", "ponytail", "bald", "bob", "curly")
+ACCESSORIES = {"glasses": 0.2, "bag": 0.2, "lanyard": 0.1}  # independent chances
+HEAD_DENSITY, HAND_DENSITY = 3.0, 2.0  # Gaussians per area relative to the body (faces and fingers resolve)
+KEY_LIGHT = np.array([0.35, 0.2, 1.0]) / np.linalg.norm([0.35, 0.2, 1.0])
+AMBIENT = 0.66  # baked shading: AMBIENT + (1 − AMBIENT) · (½ + ½ n·L)
 
 
 @dataclass
@@ -62,22 +77,39 @@ class AvatarParams:
     """What an identity looks like (all lengths in metres, colours sRGB in [0, 1])."""
 
     height_m: float
+    sex: str
+    age_group: str
+    biacromial_m: float
+    hip_m: float
+    chest_depth_m: float
+    head_scale: float
     girth: float
-    shoulders: float
-    hips: float
     skin: list[float]
     top: str
     bottom: str
     dress: bool
     pattern: str
+    top_fabric: str
+    bottom_fabric: str
     top_colour: list[float]
     accent_colour: list[float]
     bottom_colour: list[float]
     shoe_colour: list[float]
+    sole_colour: list[float]
     hair: str
     hair_colour: list[float]
+    eye_colour: list[float]
+    accessories: list[str]
+    accessory_colour: list[float]
     stripe_m: float = 0.04
     extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def body(self) -> Body:
+        """The measurements as an anthropometry record."""
+        return Body(
+            self.sex, self.age_group, self.height_m, self.biacromial_m, self.hip_m, self.chest_depth_m, self.head_scale
+        )
 
 
 def _colour(rng: np.random.Generator) -> list[float]:
@@ -88,32 +120,60 @@ def _colour(rng: np.random.Generator) -> list[float]:
     return [round(float(c), 4) for c in rgb]
 
 
+def _rounded(values) -> list[float]:
+    return [round(float(c), 4) for c in values]
+
+
 def sample_params(rng: np.random.Generator) -> AvatarParams:
     """Draw one identity's parameters."""
+    body = sample_body(rng)
     tone = rng.uniform(0, len(SKIN_TONES) - 1)
     low = int(np.floor(tone))
     skin = SKIN_TONES[low] + (tone - low) * (SKIN_TONES[min(low + 1, len(SKIN_TONES) - 1)] - SKIN_TONES[low])
-    dress = bool(rng.random() < 0.12)
+    dress = bool(rng.random() < (0.2 if body.sex == "female" else 0.02))
+    skirt_p = 0.25 if body.sex == "female" else 0.02
+    bottom = "skirt" if dress else str(rng.choice(BOTTOMS, p=[0.78 - skirt_p, 0.22, skirt_p]))
+    bottom_fabric = "denim" if bottom != "skirt" and rng.random() < 0.45 else str(rng.choice(["cotton", "knit"]))
+    bottom_colour = DENIM[rng.integers(len(DENIM))] if bottom_fabric == "denim" else _colour(rng)
+    hair_p = (
+        [0.3, 0.22, 0.1, 0.12, 0.06, 0.12, 0.08] if body.sex == "female" else [0.55, 0.04, 0.02, 0.03, 0.2, 0.04, 0.12]
+    )
+    grey = body.age_group == "older" and rng.random() < 0.7
+    hair_colour = (
+        HAIR_COLOURS[-1] * rng.uniform(0.9, 1.2) if grey else HAIR_COLOURS[rng.integers(len(HAIR_COLOURS) - 1)]
+    )
+    accessories = [name for name, chance in ACCESSORIES.items() if rng.random() < chance]
     return AvatarParams(
-        height_m=round(float(rng.uniform(1.55, 1.95)), 4),
-        girth=round(float(rng.uniform(0.85, 1.2)), 4),
-        shoulders=round(float(rng.uniform(0.9, 1.1)), 4),
-        hips=round(float(rng.uniform(0.9, 1.12)), 4),
-        skin=[round(float(c), 4) for c in skin],
-        top=str(rng.choice(TOPS)),
-        bottom="skirt" if dress else str(rng.choice(BOTTOMS, p=[0.6, 0.2, 0.2])),
+        height_m=body.stature_m,
+        sex=body.sex,
+        age_group=body.age_group,
+        biacromial_m=body.biacromial_m,
+        hip_m=body.hip_m,
+        chest_depth_m=body.chest_depth_m,
+        head_scale=body.head_scale,
+        girth=round(float(np.clip(rng.normal(1.0, 0.07), 0.85, 1.25)), 4),
+        skin=_rounded(skin),
+        top=str(rng.choice(TOPS, p=[0.5, 0.38, 0.12])),
+        bottom=bottom,
         dress=dress,
         pattern=str(rng.choice(PATTERNS, p=[0.55, 0.25, 0.2])),
+        top_fabric=str(rng.choice(FABRICS, p=[0.6, 0.28, 0.12])),
+        bottom_fabric=bottom_fabric,
         top_colour=_colour(rng),
         accent_colour=_colour(rng),
-        bottom_colour=_colour(rng),
+        bottom_colour=_rounded(np.clip(np.asarray(bottom_colour) * rng.uniform(0.85, 1.1), 0, 1)),
         shoe_colour=_colour(rng),
-        hair=str(rng.choice(HAIR, p=[0.35, 0.25, 0.12, 0.13, 0.15])),
-        hair_colour=[round(float(c), 4) for c in HAIR_COLOURS[rng.integers(len(HAIR_COLOURS))]],
+        sole_colour=_rounded(rng.choice([[0.92, 0.91, 0.88], [0.12, 0.11, 0.1], [0.55, 0.42, 0.3]])),
+        hair=str(rng.choice(HAIR, p=hair_p)),
+        hair_colour=_rounded(np.clip(hair_colour, 0, 1)),
+        eye_colour=_rounded(EYE_COLOURS[rng.integers(len(EYE_COLOURS))]),
+        accessories=accessories,
+        accessory_colour=_colour(rng),
         stripe_m=round(float(rng.uniform(0.025, 0.06)), 4),
     )
 
 
+# ---- surfaces -------------------------------------------------------------------------------------
 @dataclass
 class _Part:
     """A surface: a tapered elliptic tube between two points, or an ellipsoid (``end`` None)."""
@@ -121,91 +181,131 @@ class _Part:
     name: str
     start: np.ndarray
     end: np.ndarray | None
-    radii: tuple[float, float, float]  # tube: (r0, r1, depth/width ratio); ellipsoid: semi-axes
+    radii: tuple[float, float, float]  # tube: (r0, r1, depth/width ratio); ellipsoid: semi-axes (x, y, z)
     region: str
+    density: float = 1.0  # Gaussians per area relative to the body
+
+
+def _head_centre(p: AvatarParams, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Head ellipsoid centre and semi-axes (the top stays at the stature for larger child heads)."""
+    s, k = p.height_m / 1.75, p.head_scale
+    radii = np.array([0.1, 0.085, 0.115]) * s * k
+    centre = rest[J["head"]] + np.array([0.012, 0.0, 0.104]) * s
+    centre[2] -= (k - 1.0) * 0.115 * s
+    return centre, radii
 
 
 def _body_parts(p: AvatarParams, rest: np.ndarray) -> list[_Part]:
     h, g = p.height_m, p.girth
     s = h / 1.75
 
-    def tube(name, a, b, r0, r1, region, flat=1.0):
+    def tube(name, a, b, r0, r1, region, flat=1.0, density=1.0):
         return _Part(
             name,
-            rest[J[a]] if isinstance(a, str) else a,
-            rest[J[b]] if isinstance(b, str) else b,
+            rest[J[a]] if isinstance(a, str) else np.asarray(a, float),
+            rest[J[b]] if isinstance(b, str) else np.asarray(b, float),
             (r0 * s * g, r1 * s * g, flat),
             region,
+            density,
         )
 
+    def blob(name, centre, radii, region, density=1.0):
+        return _Part(name, np.asarray(centre, float), None, tuple(float(r) for r in radii), region, density)
+
     pelvis, neck = rest[J["pelvis"]], rest[J["neck"]]
+    hc, hr = _head_centre(p, rest)
+    chest_half = 0.42 * p.biacromial_m  # torso half-width under the shoulders (deltoids included)
+    waist_half = 0.48 * p.hip_m
+    flat = float(np.clip(p.chest_depth_m / (2 * chest_half), 0.5, 0.85))
     parts = [
-        _Part(
-            "head", rest[J["head"]] + np.array([0.012, 0.0, 0.104]) * s, None, (0.1 * s, 0.085 * s, 0.115 * s), "head"
+        blob("head", hc, hr, "head", HEAD_DENSITY),
+        blob(
+            "nose",
+            hc + np.array([0.96 * hr[0], 0.0, -0.12 * hr[2]]),
+            np.array([0.024, 0.016, 0.032]) * s,
+            "nose",
+            HEAD_DENSITY,
         ),
-        tube("neck", "neck", rest[J["head"]] + np.array([0, 0, 0.02 * s]), 0.05, 0.048, "neck"),
-        tube(
+        tube("neck", "neck", hc - np.array([0, 0, 0.05 * s]), 0.05, 0.048, "neck"),
+        _Part(
             "torso",
             pelvis - np.array([0, 0, 0.06 * s]),
             neck - np.array([0, 0, 0.03 * s]),
-            0.165 * p.hips,
-            0.175 * p.shoulders,
+            (waist_half * g, chest_half * g, flat),
             "torso",
-            flat=0.62,
         ),
-        tube("shoulders", rest[J["left_shoulder"]] * [1, 1, 1], rest[J["right_shoulder"]], 0.055, 0.055, "torso"),
+        tube("shoulders", "left_shoulder", "right_shoulder", 0.055, 0.055, "torso"),
     ]
-    for side in ("left", "right"):
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        shoulder, wrist, hand = rest[J[f"{side}_shoulder"]], rest[J[f"{side}_wrist"]], rest[J[f"{side}_hand"]]
         parts += [
+            blob(f"{side}_ear", hc + np.array([-0.05 * hr[0], sign * 0.97 * hr[1], -0.05 * hr[2]]), np.array([0.02, 0.011, 0.03]) * s * p.head_scale, "ear", HEAD_DENSITY),
+            blob(f"{side}_shoulder_cap", shoulder + np.array([0, sign * 0.01 * s, 0]), np.array([0.058, 0.06, 0.06]) * s * g, f"{side}_shoulder_cap"),
             tube(f"{side}_upper_arm", f"{side}_shoulder", f"{side}_elbow", 0.048, 0.04, f"{side}_upper_arm"),
             tube(f"{side}_forearm", f"{side}_elbow", f"{side}_wrist", 0.039, 0.031, f"{side}_forearm"),
-            _Part(
-                f"{side}_hand",
-                0.5 * (rest[J[f"{side}_wrist"]] + rest[J[f"{side}_hand"]]),
-                None,
-                (0.022 * s, 0.05 * s, 0.045 * s),
-                "hand",
-            ),
-            tube(f"{side}_thigh", f"{side}_hip", f"{side}_knee", 0.08 * p.hips, 0.056, f"{side}_thigh"),
+            blob(f"{side}_palm", 0.45 * wrist + 0.55 * hand, np.array([0.042, 0.045, 0.017]) * s, "hand", HAND_DENSITY),
+            tube(f"{side}_fingers", hand, hand + np.array([0.0, sign * 0.085 * s, -0.004 * s]), 0.016 / g, 0.013 / g, "fingers", 2.5, HAND_DENSITY),
+            tube(f"{side}_thumb", wrist + np.array([0.025, sign * 0.035, -0.004]) * s, wrist + np.array([0.065, sign * 0.07, -0.01]) * s, 0.011 / g, 0.009 / g, "hand", 1.0, HAND_DENSITY),
+            blob(f"{side}_hip_cap", rest[J[f"{side}_hip"]] + np.array([0, sign * 0.015 * s, -0.01 * s]), np.array([0.085, 0.08, 0.08]) * s * g * (p.hip_m / 0.35), f"{side}_hip_cap"),
+            tube(f"{side}_thigh", f"{side}_hip", f"{side}_knee", 0.08 * p.hip_m / 0.35, 0.056, f"{side}_thigh"),
             tube(f"{side}_shin", f"{side}_knee", f"{side}_ankle", 0.054, 0.038, f"{side}_shin"),
-            _Part(
+            blob(
                 f"{side}_foot",
                 0.5 * (rest[J[f"{side}_ankle"]] + rest[J[f"{side}_foot"]]) + np.array([0.01, 0, -0.01]) * s,
-                None,
-                (0.12 * s, 0.048 * s, 0.04 * s),
+                np.array([0.12, 0.048, 0.04]) * s,
                 "foot",
             ),
-        ]
+        ]  # fmt: skip
     if p.bottom == "skirt":
         waist = pelvis + np.array([0, 0, 0.03 * s])
         hem = np.array([waist[0], 0.0, (0.33 if p.dress else 0.4) * h])
-        parts.append(_Part("skirt", waist, hem, (0.17 * s * g * p.hips, 0.26 * s * g * p.hips, 0.8), "skirt"))
-    head = parts[0].start
+        parts.append(_Part("skirt", waist, hem, (waist_half * g * 1.03, waist_half * g * 1.55, 0.8), "skirt"))
+    if p.hair != "bald":
+        volume = {"curly": 1.16, "bob": 1.1}.get(p.hair, 1.07)
+        parts.append(blob("hair", hc + np.array([-0.01, 0.0, 0.01]) * s, hr * volume, "hair", HEAD_DENSITY))
     if p.hair == "long":
         parts.append(
             _Part(
                 "long_hair",
-                head + np.array([-0.04, 0, 0.02]) * s,
-                head + np.array([-0.06, 0, -0.24]) * s,
-                (0.1 * s, 0.11 * s, 0.7),
+                hc + np.array([-0.05, 0, 0.0]) * s,
+                hc + np.array([-0.07, 0, -0.26]) * s,
+                (0.1 * s, 0.11 * s, 0.6),
                 "hair",
             )
         )
     elif p.hair == "bun":
-        parts.append(
-            _Part("bun", head + np.array([-0.085, 0, 0.08]) * s, None, (0.045 * s, 0.045 * s, 0.045 * s), "hair")
-        )
+        parts.append(blob("bun", hc + np.array([-0.09, 0, 0.08]) * s, np.array([0.045, 0.045, 0.045]) * s, "hair"))
     elif p.hair == "ponytail":
         parts.append(
             _Part(
                 "ponytail",
-                head + np.array([-0.1, 0, 0.04]) * s,
-                head + np.array([-0.13, 0, -0.2]) * s,
+                hc + np.array([-0.1, 0, 0.04]) * s,
+                hc + np.array([-0.13, 0, -0.2]) * s,
                 (0.035 * s, 0.02 * s, 1.0),
                 "hair",
             )
         )
-    return parts
+    if "bag" in p.accessories:
+        side = 1.0 if p.extra.get("bag_left", True) else -1.0
+        centre = pelvis + np.array([-0.01, side * (waist_half * g + 0.05 * s), 0.0])
+        parts.append(blob("bag", centre, np.array([0.1, 0.045, 0.12]) * s, "bag"))
+    if "glasses" in p.accessories:
+        for side in (1.0, -1.0):
+            eye = hc + hr * _EYE_DIR * np.array([1.0, side, 1.0])
+            parts.append(
+                _Part(
+                    f"lens_{side:+.0f}",
+                    eye + np.array([0.012 * s, 0, 0]),
+                    eye + np.array([0.016 * s, 0, 0]),
+                    (0.022 * s, 0.022 * s, 1.0),
+                    "glasses",
+                    HEAD_DENSITY,
+                )
+            )
+    return parts  # fmt: skip
+
+
+_EYE_DIR = np.array([0.82, 0.36, 0.16]) / np.linalg.norm([0.82, 0.36, 0.16])
 
 
 def _area(part: _Part) -> float:
@@ -224,15 +324,19 @@ def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.cross(axis, depth), depth
 
 
-def _sample(part: _Part, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``n`` points on the part's surface: positions, unit normals, and the position along it (0–1)."""
+def _sample(part: _Part, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` points on the part's surface.
+
+    Returns positions, unit normals, the position along the part (0–1), and the surface direction (the
+    unit-sphere point for ellipsoids; the angle around a tube as (cos, sin, 0)).
+    """
     if part.end is None:
         v = rng.normal(size=(n, 3))
         v /= np.linalg.norm(v, axis=1, keepdims=True)
         radii = np.asarray(part.radii)
         normal = v / radii
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-        return part.start + v * radii, normal, (v[:, 2] + 1) / 2
+        return part.start + v * radii, normal, (v[:, 2] + 1) / 2, v
     axis = part.end - part.start
     length = float(np.linalg.norm(axis))
     unit = axis / length
@@ -245,63 +349,165 @@ def _sample(part: _Part, n: int, rng: np.random.Generator) -> tuple[np.ndarray, 
     normal = c * width + s * depth / max(part.radii[2], 1e-3)
     normal -= unit * ((part.radii[1] - part.radii[0]) / length)  # cone slope
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    return part.start + t[:, None] * axis + offset, normal, t
+    return part.start + t[:, None] * axis + offset, normal, t, np.column_stack([c[:, 0], s[:, 0], np.zeros(n)])
+
+
+def _hair_mask(p: AvatarParams, v: np.ndarray) -> np.ndarray:
+    """Which points of the hair shell (unit directions from the head centre) carry hair."""
+    front = v[:, 0] > 0.3
+    line = {"short": -0.25, "curly": -0.3, "bob": -0.6, "long": -0.55, "bun": -0.3, "ponytail": -0.3}[p.hair]
+    keep = v[:, 2] > line
+    keep &= ~front | (v[:, 2] > 0.5)  # the forehead hairline
+    if p.hair in ("bob", "long"):
+        keep &= ~(front & (np.abs(v[:, 1]) < 0.55) & (v[:, 2] < 0.5))  # the face stays open
+    return keep
+
+
+# ---- looks ----------------------------------------------------------------------------------------
+def _ellipse(v: np.ndarray, cy: float, cz: float, ry: float, rz: float) -> np.ndarray:
+    return (v[:, 0] > 0.45) & (((v[:, 1] - cy) / ry) ** 2 + ((v[:, 2] - cz) / rz) ** 2 < 1.0)
+
+
+def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray) -> None:
+    """Eyes (sclera, iris), brows, lips and cheeks on the head's front (``v``: unit directions, x forward)."""
+    skin = np.array(p.skin)
+    for side in (1.0, -1.0):
+        ey, ez = side * _EYE_DIR[1], _EYE_DIR[2]
+        out[_ellipse(v, ey, ez, 0.12, 0.055)] = [0.92, 0.9, 0.86]
+        out[_ellipse(v, ey, ez, 0.05, 0.05)] = p.eye_colour
+        out[_ellipse(v, ey, ez, 0.02, 0.02)] = [0.03, 0.03, 0.03]
+        out[_ellipse(v, side * 0.34, ez + 0.13, 0.14, 0.028)] = np.array(p.hair_colour) * 0.8
+        cheek = _ellipse(v, side * 0.42, -0.12, 0.14, 0.1)
+        out[cheek] = out[cheek] * [1.02, 0.95, 0.94]
+    out[_ellipse(v, 0.0, -0.33, 0.2, 0.035)] = skin * [0.82, 0.55, 0.55]
+    out[_ellipse(v, 0.0, -0.295, 0.17, 0.012)] = skin * [0.55, 0.35, 0.35]  # the line between the lips
+
+
+def _fabric(kind: str, points: np.ndarray, around: np.ndarray) -> np.ndarray:
+    """A multiplicative texture: denim twill, knit ribs or cotton (smooth, faint)."""
+    z = points[:, 2]
+    arc = np.arctan2(around[:, 1], around[:, 0]) * 0.05  # metres around a tube of ~5 cm radius
+    if kind == "denim":
+        return 1.0 + 0.07 * np.sin(2 * np.pi * (z + arc) / 0.0045) - 0.04 * np.sin(2 * np.pi * z / 0.37) ** 2
+    if kind == "knit":
+        return 1.0 + 0.08 * np.sin(2 * np.pi * arc / 0.006)
+    return 1.0 + 0.025 * np.sin(2 * np.pi * (points[:, 0] * 7 + z * 11)) * np.sin(2 * np.pi * points[:, 1] * 9)
+
+
+def _folds(t: np.ndarray, near_start: bool, near_end: bool) -> np.ndarray:
+    """Horizontal creases near the joint ends of a sleeve or trouser leg."""
+    weight = np.zeros_like(t)
+    if near_end:
+        weight = np.maximum(weight, np.exp(-(((t - 1.0) / 0.18) ** 2)))
+    if near_start:
+        weight = np.maximum(weight, np.exp(-((t / 0.18) ** 2)))
+    return 1.0 - 0.14 * weight * np.sin(2 * np.pi * t * 9) ** 2
 
 
 def _colours(
-    p: AvatarParams, part: _Part, points: np.ndarray, normals: np.ndarray, t: np.ndarray, head: np.ndarray
+    p: AvatarParams, part: _Part, points: np.ndarray, normals: np.ndarray, t: np.ndarray, v: np.ndarray
 ) -> np.ndarray:
-    """Per-point RGB for a part, from the identity's clothing, hair and skin."""
+    """Per-point RGB for a part (before the baked light), from the identity's clothing, hair and skin."""
     n = len(points)
-    skin, top, bottom = np.array(p.skin), np.array(p.top_colour), np.array(p.bottom_colour)
-    out = np.tile(skin, (n, 1))
-    top_rgb = np.tile(top, (n, 1))
+    skin, bottom = np.array(p.skin), np.array(p.bottom_colour)
+    tone = 1.0 + 0.035 * np.sin(points[:, 0] * 23 + 1.3) * np.sin(points[:, 1] * 19) * np.sin(points[:, 2] * 17 + 0.7)
+    out = skin * tone[:, None]
+    top_rgb = np.tile(np.array(p.top_colour), (n, 1))
     if p.pattern == "stripes":
-        band = (np.floor(points[:, 2] / p.stripe_m) % 2).astype(bool)
-        top_rgb[band] = p.accent_colour
+        top_rgb[(np.floor(points[:, 2] / p.stripe_m) % 2).astype(bool)] = p.accent_colour
     elif p.pattern == "two_tone":
         top_rgb[points[:, 2] < 0.63 * p.height_m] = p.accent_colour
-    region = part.region
+    top_rgb *= _fabric(p.top_fabric, points, v)[:, None]
+    bottom_rgb = bottom * _fabric(p.bottom_fabric, points, v)[:, None]
+    region, h = part.region, p.height_m
+    seam = np.abs(v[:, 1]) < 0.06  # the sides of a vertical tube (its width axis is lateral)
     if region == "torso":
-        out = top_rgb
+        out = top_rgb.copy()
+        out[seam] *= 0.84
         if p.top == "tank":
-            bare = np.abs(points[:, 1]) > 0.13 * p.height_m / 1.75 * p.shoulders
-            out[bare & (points[:, 2] > 0.78 * p.height_m)] = skin
-        low = points[:, 2] < 0.5 * p.height_m
-        out[low] = p.bottom_colour if not p.dress else top_rgb[low]
+            bare = np.abs(points[:, 1]) > 0.3 * p.biacromial_m
+            out[bare & (points[:, 2] > 0.78 * h)] = skin
+        low = points[:, 2] < 0.5 * h
+        out[low] = bottom_rgb[low] if not p.dress else top_rgb[low]
+        belt = np.abs(points[:, 2] - 0.5 * h) < 0.012 * h
+        if not p.dress:
+            out[belt] *= 0.6
+        if "bag" in p.accessories:  # the strap across the chest
+            strap = np.abs(points[:, 2] - (0.72 * h - 0.9 * points[:, 1])) < 0.018
+            out[strap & (points[:, 0] > 0) & (points[:, 2] > 0.52 * h)] = np.array(p.accessory_colour) * 0.7
+        if "lanyard" in p.accessories:
+            band = (np.abs(np.abs(points[:, 1]) - (points[:, 2] - 0.66 * h) * 0.45) < 0.008) & (points[:, 2] > 0.66 * h)
+            out[band & (points[:, 0] > 0)] = p.accessory_colour
+            badge = (np.abs(points[:, 1]) < 0.03) & (np.abs(points[:, 2] - 0.645 * h) < 0.04) & (points[:, 0] > 0)
+            out[badge] = [0.95, 0.95, 0.93]
+    elif region.endswith("shoulder_cap"):
+        out = skin * tone[:, None] if p.top == "tank" else top_rgb
     elif region.endswith("upper_arm"):
         covered = t < (0.55 if p.top == "tshirt" else 1.01) if p.top != "tank" else np.zeros(n, bool)
-        out[covered] = top_rgb[covered]
+        sleeve = top_rgb * _folds(t, False, p.top == "longsleeve")[:, None]
+        if p.top == "tshirt":
+            sleeve[(t > 0.5) & (t < 0.55)] *= 0.8  # the hem
+        out[covered] = sleeve[covered]
     elif region.endswith("forearm"):
         if p.top == "longsleeve":
-            out = top_rgb
+            out = top_rgb * _folds(t, True, False)[:, None]
+            out[t > 0.95] *= 0.82  # the cuff
+    elif region.endswith("hip_cap"):
+        out = bottom_rgb if not p.dress else top_rgb
     elif region.endswith("thigh"):
         if p.bottom in ("trousers", "shorts"):
             covered = t < (0.6 if p.bottom == "shorts" else 1.01)
-            out[covered] = bottom
+            legs = bottom_rgb * _folds(t, False, p.bottom == "trousers")[:, None]
+            legs[seam] *= 0.84
+            if p.bottom == "shorts":
+                legs[(t > 0.55) & (t < 0.6)] *= 0.8
+            out[covered] = legs[covered]
+        elif p.bottom == "skirt":
+            out = skin * tone[:, None]
     elif region.endswith("shin"):
         if p.bottom == "trousers":
-            out = np.tile(bottom, (n, 1))
+            out = bottom_rgb * _folds(t, True, False)[:, None]
+            out[seam] *= 0.84
+            out[t > 0.93] *= 0.82
     elif region == "foot":
         out = np.tile(np.array(p.shoe_colour), (n, 1))
+        out[points[:, 2] < points[:, 2].min() + 0.012 * h] = p.sole_colour
     elif region == "skirt":
-        out = top_rgb if p.dress else np.tile(bottom, (n, 1))
+        pleats = 1.0 - 0.1 * np.sin(np.arctan2(v[:, 1], v[:, 0]) * 14) ** 2
+        out = (top_rgb if p.dress else bottom_rgb) * pleats[:, None]
     elif region == "hair":
-        out = np.tile(np.array(p.hair_colour), (n, 1))
-    elif region == "head" and p.hair != "bald":
-        rel = points - head
-        scalp = (rel[:, 2] > 0.02 * p.height_m) | ((rel[:, 0] < -0.02 * p.height_m) & (rel[:, 2] > -0.06 * p.height_m))
-        if p.hair == "short":
-            scalp &= rel[:, 2] > -0.01 * p.height_m
-        out[scalp] = p.hair_colour
+        curls = 1.0 + (0.12 if p.hair == "curly" else 0.06) * np.sin(points[:, 2] * 260) * np.sin(points[:, 1] * 240)
+        out = np.array(p.hair_colour) * curls[:, None]
+    elif region == "head":
+        _face(p, v, out)
+    elif region == "nose":
+        out[normals[:, 2] < -0.6] *= 0.8  # the nostrils' shadow
+    elif region == "ear":
+        out *= 0.93
+    elif region == "fingers":
+        across = 2.0 * v[:, 1]  # −2…2 across the hand's width
+        gaps = (np.abs(across - np.round(across)) < 0.12) & (np.abs(across) < 1.5)  # three creases: four fingers
+        out[gaps & (t > 0.25)] *= 0.72
+        out[t > 0.93] *= [1.05, 0.95, 0.93]  # nails
+    elif region == "bag":
+        out = np.tile(np.array(p.accessory_colour), (n, 1))
+        out[np.abs(v[:, 2] - 0.55) < 0.04] *= 0.7  # the flap
+    elif region == "glasses":
+        out = np.tile([0.08, 0.08, 0.09], (n, 1))
     return out
 
 
-def _skirt_weights(points: np.ndarray, part: _Part) -> tuple[np.ndarray, np.ndarray]:
-    """Skirts hang from the pelvis and follow the hips towards the hem (not one leg)."""
-    length = float(np.linalg.norm(part.end - part.start))
-    down = np.clip((part.start[2] - points[:, 2]) / length, 0.0, 1.0)
-    side = np.clip(points[:, 1] / (part.radii[1] + 1e-9), -1.0, 1.0)
+def _shade(colours: np.ndarray, normals: np.ndarray, points: np.ndarray, height: float) -> np.ndarray:
+    """Bake a soft key light from above and in front, and a little darkening towards the feet."""
+    lit = AMBIENT + (1.0 - AMBIENT) * (0.5 + 0.5 * normals @ KEY_LIGHT)
+    ground = 0.9 + 0.1 * np.clip(points[:, 2] / (0.3 * height), 0.0, 1.0)
+    return colours * (lit * ground)[:, None]
+
+
+def _pelvis_weights(points: np.ndarray, top: float, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """What hangs from the pelvis (skirts, bags) follows the hips towards its lower end (not one leg)."""
+    down = np.clip((top - points[:, 2]) / max(length, 1e-6), 0.0, 1.0)
+    side = np.clip(points[:, 1] / (np.abs(points[:, 1]).max() + 1e-9), -1.0, 1.0)
     dense = np.zeros((len(points), N_JOINTS))
     dense[:, J["pelvis"]] = 1.0 - 0.6 * down
     dense[:, J["left_hip"]] = 0.6 * down * (1 + side) / 2
@@ -326,8 +532,23 @@ def _split(weights: np.ndarray, total: int) -> np.ndarray:
     return counts
 
 
+def _sample_part(p: AvatarParams, part: _Part, count: int, rng: np.random.Generator):
+    """``count`` surface points of a part; the hair shell keeps only its styled region (oversampled)."""
+    if part.name != "hair":
+        return _sample(part, count, rng)
+    got = [[], [], [], []]
+    kept = 0
+    while kept < count:
+        pts, nrm, t, v = _sample(part, 3 * count, rng)
+        keep = _hair_mask(p, v)
+        for store, arr in zip(got, (pts, nrm, t, v), strict=True):
+            store.append(arr[keep])
+        kept += int(keep.sum())
+    return tuple(np.concatenate(a)[:count] for a in got)
+
+
 def generate_avatar(
-    rng: np.random.Generator, avatar_id: str, n_gaussians: int = 20_000, params: AvatarParams | None = None
+    rng: np.random.Generator, avatar_id: str, n_gaussians: int = 40_000, params: AvatarParams | None = None
 ) -> AvatarAsset:
     """One procedural identity with exactly ``n_gaussians`` Gaussians (5,000–100,000)."""
     if not 5_000 <= n_gaussians <= 100_000:
@@ -335,24 +556,25 @@ def generate_avatar(
     p = params or sample_params(rng)
     rest = rest_joints(p.height_m)
     parts = _body_parts(p, rest)
-    counts = _split(np.array([_area(part) for part in parts]), n_gaussians)
-    means, normals, colours, is_skirt = [], [], [], []
-    for part, count in zip(parts, counts, strict=True):
-        points, normal, t = _sample(part, int(count), rng)
+    areas = np.array([_area(part) for part in parts])
+    counts = _split(areas * np.array([part.density for part in parts]), n_gaussians)
+    means, normals, colours, spacing, hanging = [], [], [], [], []
+    for part, count, area in zip(parts, counts, areas, strict=True):
+        points, normal, t, v = _sample_part(p, part, int(count), rng)
         means.append(points)
         normals.append(normal)
-        colours.append(_colours(p, part, points, normal, t, parts[0].start))
-        is_skirt.append(np.full(len(points), part.region == "skirt"))
-    means, normals, colours, is_skirt = map(np.concatenate, (means, normals, colours, is_skirt))
+        colours.append(_colours(p, part, points, normal, t, v))
+        spacing.append(np.full(len(points), np.sqrt(area / max(int(count), 1))))
+        hanging.append(np.full(len(points), part.region in ("skirt", "bag")))
+    means, normals, colours, spacing, hanging = map(np.concatenate, (means, normals, colours, spacing, hanging))
     means[:, 2] -= means[:, 2].min()  # soles on z = 0
-    colours = np.clip(colours * rng.uniform(0.94, 1.06, (len(colours), 1)), 0.0, 1.0)  # fabric/skin texture
+    colours = _shade(colours, normals, means, p.height_m)
+    colours = np.clip(colours * rng.uniform(0.975, 1.025, (len(colours), 1)), 0.0, 1.0)  # fine grain
     indices, weights = transfer_weights(means, rest, p.height_m)
-    if is_skirt.any():
-        indices[is_skirt], weights[is_skirt] = _skirt_weights(
-            means[is_skirt], next(x for x in parts if x.region == "skirt")
-        )
-    spacing = np.sqrt(sum(_area(x) for x in parts) / n_gaussians)
-    log_scales = np.log(np.tile([0.75 * spacing, 0.75 * spacing, 0.12 * spacing], (n_gaussians, 1)))
+    if hanging.any():
+        top = float(rest[J["pelvis"], 2] + 0.03 * p.height_m / 1.75)
+        indices[hanging], weights[hanging] = _pelvis_weights(means[hanging], top, top - 0.33 * p.height_m)
+    log_scales = np.log(np.column_stack([0.75 * spacing, 0.75 * spacing, 0.12 * spacing]))
     cloud = GaussianCloud(
         means=means.astype(np.float32),
         quats=_disc_quats(normals).astype(np.float32),
@@ -360,16 +582,18 @@ def generate_avatar(
         opacity_logits=np.full(n_gaussians, 4.0, np.float32),
         sh_dc=((colours - 0.5) / SH_C0).astype(np.float32),
     )
+    body = p.body
     meta = {
         "source": "procedural",
         "height_m": float(p.height_m),
         "scale": 1.0,
+        "body_radius_m": body.body_radius_m,
         "generator": {"name": "song.datasets.avatars.generate", "version": GENERATOR_VERSION, **vars(p)},
     }
     return AvatarAsset(avatar_id, cloud, indices, weights, rest.astype(np.float32), meta)
 
 
-def build_pool(out_dir: str | Path, count: int, seed: int, n_gaussians: int = 20_000) -> list[Path]:
+def build_pool(out_dir: str | Path, count: int, seed: int, n_gaussians: int = 40_000) -> list[Path]:
     """Write ``count`` identities ``avatar_{seed}_{i:04d}.avatar.npz``; avatar i depends only on (seed, i)."""
     paths = []
     for index in range(count):

@@ -15,6 +15,12 @@ Axis detection, for a person standing in a canonical pose:
 
 Each rule is checked for a clear margin; an ambiguous body raises a one-line error asking for
 ``up``/``forward`` explicitly.
+
+Plausibility (:func:`human_shape_problems`): once upright and scaled, a standing person is broad at the
+hips and shoulders for their height (hip and shoulder breadth are about 20 % and 24 % of stature in
+adults), has a head clearly narrower than the shoulders, and is shallower front to back than across.
+A splat failing any of these (a guitar scaled to 1.75 m is 9 cm wide at the "hips") is refused unless
+the caller passes the axes explicitly and ``force``.
 """
 
 from __future__ import annotations
@@ -85,6 +91,34 @@ def detect_forward(points: np.ndarray, up: np.ndarray, path: Path) -> np.ndarray
     return forward
 
 
+MIN_HIP_WIDTH, MIN_SHOULDER_WIDTH = 0.12, 0.17  # × height: well below any adult's or child's (≈ 0.20, 0.24)
+MAX_HEAD_TO_SHOULDERS, MAX_DEPTH_TO_WIDTH = 0.75, 1.25
+
+
+def _width(means: np.ndarray, height: float, lo: float, hi: float, axis: int = 1) -> float:
+    """Robust extent (2nd–98th percentile, m) along ``axis`` of the slice lo…hi × height."""
+    z = means[:, 2]
+    part = means[(z >= lo * height) & (z <= hi * height), axis]
+    return float(np.percentile(part, 98) - np.percentile(part, 2)) if len(part) > 20 else 0.0
+
+
+def human_shape_problems(means: np.ndarray, height: float) -> list[str]:
+    """Why upright, scaled Gaussian means (body frame, feet at z = 0) do not look like a standing person."""
+    hips, shoulders = _width(means, height, 0.45, 0.55), _width(means, height, 0.72, 0.82)
+    head = _width(means, height, 0.9, 1.0)
+    chest_w, chest_d = _width(means, height, 0.6, 0.72), _width(means, height, 0.6, 0.72, axis=0)
+    problems = []
+    if hips < MIN_HIP_WIDTH * height:
+        problems.append(f"hip width {hips:.2f} m (a person of {height:g} m: ≥ {MIN_HIP_WIDTH * height:.2f} m)")
+    if shoulders < MIN_SHOULDER_WIDTH * height:
+        problems.append(f"shoulder width {shoulders:.2f} m (≥ {MIN_SHOULDER_WIDTH * height:.2f} m)")
+    if head > MAX_HEAD_TO_SHOULDERS * max(shoulders, 1e-9):
+        problems.append(f"head {head:.2f} m wide, not narrower than the shoulders ({shoulders:.2f} m)")
+    if chest_d > MAX_DEPTH_TO_WIDTH * max(chest_w, 1e-9):
+        problems.append(f"deeper ({chest_d:.2f} m) than wide ({chest_w:.2f} m) at the chest")
+    return problems
+
+
 def canonical_frame(points: np.ndarray, path: Path, up: str | None, forward: str | None) -> np.ndarray:
     """Rotation (3, 3) taking source coordinates to the body frame (rows: forward, left, up)."""
     up_vec = _unit(up, path, "up") if up else detect_up(points, path)
@@ -101,6 +135,7 @@ def import_ply_avatar(
     up: str | None = None,
     forward: str | None = None,
     source: str = "",
+    force: bool = False,
 ) -> AvatarAsset:
     """Read a standard 3DGS PLY avatar and return it in SONG's asset format.
 
@@ -111,9 +146,12 @@ def import_ply_avatar(
         up: the source's up axis such as ``"+y"`` (detected when omitted).
         forward: the source's forward axis such as ``"+z"`` (detected when omitted).
         source: provenance text stored in the metadata.
+        force: import even a splat that does not look like a standing person (needs ``up`` and
+            ``forward``: detection assumes a person).
 
     Raises:
-        FormatError: unreadable PLY, or axes that cannot be detected unambiguously.
+        FormatError: unreadable PLY, axes that cannot be detected unambiguously, or a splat that
+            does not look like a person (without ``force``).
     """
     path = Path(path)
     cloud = read_gaussian_ply(path)
@@ -124,6 +162,17 @@ def import_ply_avatar(
     hips = _slice(body, np.array([0.0, 0.0, 1.0]), 0.45, 0.55)[:, :2].mean(axis=0)
     offset = -np.array([hips[0], hips[1], body[:, 2].min()])
     means = (body + offset) * scale
+    problems = human_shape_problems(means, height_m)
+    if problems and not force:
+        raise FormatError(
+            path,
+            "shape",
+            "does not look like a standing person: "
+            + "; ".join(problems)
+            + " (pass --up, --forward and --force to import it anyway)",
+        )
+    if force and not (up and forward):
+        raise FormatError(path, "force", "--force needs the source axes: pass --up and --forward")
     alignment = np.eye(4)
     alignment[:3, :3] = scale * rotation
     alignment[:3, 3] = scale * offset

@@ -11,6 +11,7 @@ a k-d tree query) and cut to the top 4, renormalised.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -42,17 +43,46 @@ def bone_segments(rest_joints: np.ndarray, height_m: float) -> tuple[np.ndarray,
     return np.asarray(starts, np.float64), np.asarray(ends, np.float64), np.asarray(owners, np.int64)
 
 
-def joint_distances(points: np.ndarray, rest_joints: np.ndarray, height_m: float) -> np.ndarray:
-    """(N, 24) distance (m) from each point to the nearest bone driven by each joint (inf if none)."""
-    start, end, owner = bone_segments(rest_joints, height_m)
-    axis = end - start
-    t = np.einsum("nsk,sk->ns", points[:, None, :] - start[None], axis) / np.maximum((axis**2).sum(axis=1), 1e-12)
-    closest = start[None] + np.clip(t, 0.0, 1.0)[..., None] * axis[None]
-    dist = np.linalg.norm(points[:, None, :] - closest, axis=2)
-    out = np.full((len(points), N_JOINTS), np.inf)
-    for joint in np.unique(owner):
-        out[:, joint] = dist[:, owner == joint].min(axis=1)
+@numba.njit(cache=True, nogil=True)
+def _bone_distances(points, start, end, owner, n_joints):  # pragma: no cover - compiled
+    out = np.full((len(points), n_joints), np.inf)
+    for i in range(len(points)):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        for k in range(len(start)):
+            ax, ay, az = end[k, 0] - start[k, 0], end[k, 1] - start[k, 1], end[k, 2] - start[k, 2]
+            rx, ry, rz = px - start[k, 0], py - start[k, 1], pz - start[k, 2]
+            t = min(max((rx * ax + ry * ay + rz * az) / max(ax * ax + ay * ay + az * az, 1e-12), 0.0), 1.0)
+            dx, dy, dz = rx - t * ax, ry - t * ay, rz - t * az
+            d = np.sqrt(dx * dx + dy * dy + dz * dz)
+            if d < out[i, owner[k]]:
+                out[i, owner[k]] = d
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _neighbour_mean(raw, idx, valid):  # pragma: no cover - compiled
+    out = np.zeros_like(raw)
+    for i in range(raw.shape[0]):
+        count = 0
+        for j in range(idx.shape[1]):
+            if valid[i, j]:
+                count += 1
+                row = idx[i, j]
+                for c in range(raw.shape[1]):
+                    out[i, c] += raw[row, c]
+        for c in range(raw.shape[1]):
+            out[i, c] /= count
+    return out
+
+
+def joint_distances(points: np.ndarray, rest_joints: np.ndarray, height_m: float) -> np.ndarray:
+    """(N, 24) distance (m) from each point to the nearest bone driven by each joint (inf if none).
+
+    Compiled (numba): a point-by-bone loop; numpy needed (N, bones, 3) temporaries and was the
+    largest cost of building an avatar.
+    """
+    start, end, owner = bone_segments(rest_joints, height_m)
+    return _bone_distances(np.ascontiguousarray(points, np.float64), start, end, owner, N_JOINTS)
 
 
 def top_k(weights: np.ndarray, k: int = TOP_K) -> tuple[np.ndarray, np.ndarray]:
@@ -86,12 +116,13 @@ def transfer_weights(
     """
     points = np.asarray(points, np.float64)
     dist = joint_distances(points, np.asarray(rest_joints, np.float64), height_m)
-    raw = np.exp(-(dist - dist.min(axis=1, keepdims=True)) / (falloff * height_m))
+    raw = np.exp(-(dist - dist.min(axis=1, keepdims=True)) / (falloff * height_m)).astype(np.float32)
     raw /= raw.sum(axis=1, keepdims=True)
     if smooth_radius > 0 and len(points) > 1:
         k = min(neighbours, len(points))
-        d, idx = cKDTree(points).query(points, k=k, distance_upper_bound=smooth_radius * height_m)
+        # both cores: the neighbour search is the largest single cost of building an avatar
+        d, idx = cKDTree(points).query(points, k=k, distance_upper_bound=smooth_radius * height_m, workers=2)
         valid = np.isfinite(d)
         idx = np.where(valid, idx, np.arange(len(points))[:, None])
-        raw = (raw[idx] * valid[..., None]).sum(axis=1) / valid.sum(axis=1, keepdims=True)
+        raw = _neighbour_mean(raw, idx.astype(np.int64), valid)
     return top_k(raw)

@@ -27,6 +27,7 @@ from song.util import sha256_bytes, sha256_json, write_text_atomic
 KEY_VARIABLES = ("GOOGLE_API_KEY", "GEMINI_API_KEY", "OPENAI_API_KEY")
 RETRY_STATUS = {408, 429, 500, 502, 503, 504}
 MAX_RETRY_AFTER_S = 60.0  # a server's suggested retry delay is honoured up to this
+MAX_REPLY_BYTES = 256 * 1024  # a scene description or a dozen routines is a few KB; larger replies are refused
 T = TypeVar("T", bound=BaseModel)
 _SLOTS: dict[int, threading.BoundedSemaphore] = {}
 
@@ -218,7 +219,7 @@ def structured_call(
         }
     )
     cached = cache_dir / f"{key}.json" if cache_dir is not None else None
-    if cached is not None and cached.is_file():
+    if cached is not None and cached.is_file() and cached.stat().st_size <= MAX_REPLY_BYTES:
         try:
             return _parse(cached.read_text(encoding="utf-8"), schema)
         except ValidationError:
@@ -244,15 +245,23 @@ def structured_call(
     return result
 
 
+def _bounded(client, text: str) -> str:
+    """The reply, unless it is over ``MAX_REPLY_BYTES`` (then an :class:`LLMError`: the offline model stands in)."""
+    size = len(text.encode("utf-8", errors="replace"))
+    if size > MAX_REPLY_BYTES:
+        raise LLMError(f"{client.provider} reply is {size:,} bytes, over the {MAX_REPLY_BYTES:,}-byte limit")
+    return text
+
+
 def _with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrency, rng) -> str:
     for attempt in range(max_retries):
         try:
             with _slot(max_concurrency):
-                return client.request(prompt, schema)
+                return _bounded(client, client.request(prompt, schema))
         except TransientLLMError as exc:
             delay = backoff_s * (2**attempt) * (0.5 + rng.random())  # exponential back-off with jitter
             if exc.retry_after_s is not None:  # the server said when to come back
                 delay = max(delay, min(exc.retry_after_s, MAX_RETRY_AFTER_S))
             time.sleep(delay)
     with _slot(max_concurrency):
-        return client.request(prompt, schema)  # the last try: its error goes to the caller
+        return _bounded(client, client.request(prompt, schema))  # the last try: its error goes to the caller

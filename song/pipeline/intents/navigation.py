@@ -109,3 +109,38 @@ def snap_points(
         if inside.any():
             pts = pts[inside]
     return pts
+
+
+MIN_WALKABLE_M2 = 2.0  # smaller than this, a crowd has nowhere to go (about four standing people)
+MIN_SPOT_SEPARATION_M = 1.0  # two standing spots at least this far apart, connected
+
+
+def usability_problems(package: ScenePackage, radius: float, contour_error: float) -> list[str]:
+    """Every reason synthesis cannot use a (valid) scene package, one sentence each; empty when usable.
+
+    Checks what the intents and crowd stages need: a walkable area (free space eroded by the body
+    radius, strips narrower than the navmesh keeps removed) of at least ``MIN_WALKABLE_M2``, two
+    connected standing spots ``MIN_SPOT_SEPARATION_M`` apart, and objects a pedestrian can stand next
+    to (not buried in walls or cut off from the main walkable part).
+    """
+    walk = walkable(package, radius, contour_error)
+    problems = []
+    if walk.area_m2 < MIN_WALKABLE_M2:
+        problems.append(
+            f"walkable area for a {radius:g} m pedestrian is {walk.area_m2:.2f} m² (need ≥ {MIN_WALKABLE_M2:g} m²)"
+        )
+    cells = np.argwhere(walk.main)
+    if len(cells):
+        span = float(np.linalg.norm(np.ptp(cells, axis=0))) * package.occupancy.resolution
+        if span < MIN_SPOT_SEPARATION_M:
+            problems.append(f"no two connected standing spots {MIN_SPOT_SEPARATION_M:g} m apart (span {span:.2f} m)")
+    objects = package.semantic_map.objects
+    if not objects:
+        problems.append("semantic_map.json: objects: none (pedestrians need objects to walk to)")
+    stranded = [obj.id for obj in objects if not len(snap_points(walk, obj.footprint))]
+    if objects and len(stranded) == len(objects):
+        problems.append(f"no object can be reached on foot ({len(objects)} objects in walls or cut off)")
+    elif stranded:
+        shown = ", ".join(stranded[:5]) + (", …" if len(stranded) > 5 else "")
+        problems.append(f"{len(stranded)} of {len(objects)} objects cannot be reached on foot: {shown}")
+    return problems

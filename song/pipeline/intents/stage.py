@@ -16,7 +16,7 @@ from song.datasets.run.intents import Intent, IntentSet, Provenance, RejectedInt
 from song.datasets.run.layout import INTENTS_FILE
 from song.datasets.scenes import ScenePackage
 from song.errors import MissingDependencyError
-from song.pipeline.chain import StageContext
+from song.pipeline.chain import StageContext, StageOutput
 from song.pipeline.intents.llm import GeminiClient, LLMError, OpenAICompatibleClient, scrub, structured_call
 from song.pipeline.intents.navigation import Walkable, snap_points, walkable
 from song.pipeline.intents.offline import OfflineIntentModel
@@ -334,9 +334,9 @@ def scene_notes(package: ScenePackage, walk: Walkable, snaps: dict, geodesic: di
     return []
 
 
-def run_intents(ctx: StageContext) -> list[str]:
-    """Stage entry: write ``intents.json``."""
+def run_intents(ctx: StageContext) -> StageOutput:
+    """Stage entry: write ``intents.json``; totals count intents and LLM fallbacks (for the run summary)."""
     run = RunFolder(ctx.run_dir)
     intents = generate_intents(ctx.scene, ctx.config, ctx.rng("intents"), cache_dir=run.llm_cache)
     write_json_atomic(SceneFolder(ctx.scene_dir).intents, intents.model_dump(mode="json"))
-    return [INTENTS_FILE]
+    return StageOutput([INTENTS_FILE], {"llm_fallbacks": int(intents.provenance.fallback)})

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from song.datasets.avatars import load_avatar
-from song.datasets.avatars.generate import build_pool, generate_avatar, sample_params
+from song.datasets.avatars.anthropometry import ANSUR_II, CHILD_SHARE, OLDER_SHARE
+from song.datasets.avatars.generate import ACCESSORIES, FABRICS, HAIR, build_pool, generate_avatar, sample_params
 from song.datasets.scenes.ply import SH_C0
 from song.geometry.skeleton import JOINT_INDEX
 from song.util import derive_rng
@@ -87,8 +88,107 @@ def test_identities_are_visibly_distinct(crowd_of_avatars) -> None:
 
 def test_parameters_cover_the_documented_ranges() -> None:
     params = [sample_params(derive_rng(3, i)) for i in range(400)]
-    heights = [p.height_m for p in params]
-    assert 1.55 <= min(heights) < 1.6 and 1.9 < max(heights) <= 1.95
-    assert {p.hair for p in params} == {"short", "long", "bun", "ponytail", "bald"}
+    adults = [p.height_m for p in params if p.age_group != "child"]
+    assert 1.4 <= min(adults) and max(adults) <= 1.97  # ±3 SD, older adults 3 cm shorter
+    assert set(HAIR) == {p.hair for p in params}
     assert {p.pattern for p in params} == {"solid", "stripes", "two_tone"}
     assert any(p.dress for p in params) and {p.bottom for p in params} == {"trousers", "shorts", "skirt"}
+    assert {a for p in params for a in p.accessories} == set(ACCESSORIES)
+    assert {p.top_fabric for p in params} == set(FABRICS)
+
+
+def test_anthropometry_of_a_500_identity_pool_matches_ansur_ii() -> None:
+    """Adults of each sex: means within 2 % and spreads within 10 % of the cited ANSUR II figures."""
+    params = [sample_params(derive_rng(11, "avatar", i)) for i in range(500)]
+    for sex in ("male", "female"):
+        adults = [p for p in params if p.sex == sex and p.age_group == "adult"]
+        assert len(adults) > 150
+        for name, values in (
+            ("stature", [p.height_m for p in adults]),
+            ("biacromial", [p.biacromial_m for p in adults]),
+            ("hip", [p.hip_m for p in adults]),
+            ("chest_depth", [p.chest_depth_m for p in adults]),
+        ):
+            mean, sd = ANSUR_II[sex][name]
+            assert abs(np.mean(values) / mean - 1) <= 0.02, (sex, name, np.mean(values), mean)
+            assert abs(np.std(values) / sd - 1) <= 0.10, (sex, name, np.std(values), sd)
+    groups = [p.age_group for p in params]
+    assert abs(groups.count("child") / 500 - CHILD_SHARE) < 0.03
+    assert abs(groups.count("older") / 500 - OLDER_SHARE) < 0.04
+    kids = [p.height_m for p in params if p.age_group == "child"]
+    assert 1.0 < min(kids) and max(kids) < 1.7
+
+
+@pytest.fixture(scope="module")
+def full_avatars():
+    return [generate_avatar(derive_rng(5, "avatar", i), f"f{i}", 40_000) for i in range(6)]
+
+
+def test_hands_face_and_hair_skin_to_their_joints(full_avatars) -> None:
+    """Fingers and palms follow the wrists and hands; the face and hair follow the head."""
+    for asset in full_avatars:
+        means, top, rest, h = asset.gaussians.means, asset.skin_indices[:, 0], asset.rest_joints, asset.height_m
+        for side in ("left", "right"):
+            sign = 1.0 if side == "left" else -1.0
+            beyond = sign * means[:, 1] > sign * rest[JOINT_INDEX[f"{side}_wrist"], 1] + 0.01 * h
+            assert beyond.sum() > 400  # palm, thumb and fingers: about 2 % of the Gaussians
+            assert np.isin(top[beyond], [JOINT_INDEX[f"{side}_wrist"], JOINT_INDEX[f"{side}_hand"]]).all()
+        head = rest[JOINT_INDEX["head"]]
+        face = (means[:, 0] > head[0] + 0.06 * h / 1.75) & (means[:, 2] > head[2] + 0.06 * h / 1.75)
+        assert face.sum() > 200
+        assert np.isin(top[face], [JOINT_INDEX["head"], JOINT_INDEX["neck"]]).mean() > 0.99
+        assert asset.meta["body_radius_m"] > 0.15
+
+
+def test_no_flying_splats_in_gait_poses(full_avatars) -> None:
+    """Posed through a gait cycle, every Gaussian stays within 3 cm of the posed body volume: capsules
+    around each joint's bones, as thick as the Gaussians that joint drives in the rest pose."""
+    from song.config import MotionConfig
+    from song.datasets.avatars.skinning import bone_segments, joint_distances
+    from song.geometry.fk import skinning_transforms
+    from song.geometry.lbs import SkinnedGaussians, lbs_positions
+    from song.pipeline.motion import ProceduralGait
+    from song.pipeline.motion.synthetic import steady_walk
+
+    motion = ProceduralGait(MotionConfig()).generate([steady_walk(1.4, seconds=4.0)], [""], [3])[0]
+    frames = np.arange(60, 120, 4)  # one stride at full speed
+    for asset in full_avatars[:3]:
+        rest, h = asset.rest_joints.astype(np.float64), asset.height_m
+        scale = h / motion.height_m
+        transforms = skinning_transforms(rest, motion.local_quats[frames], motion.root_pos[frames] * scale)
+        means = asset.gaussians.means.astype(np.float64)
+        top = asset.skin_indices[:, 0].astype(int)
+        rest_d = joint_distances(means, rest, h)[np.arange(len(means)), top]
+        thickness = np.zeros(24)
+        np.maximum.at(thickness, top, rest_d)
+        start, end, owner = bone_segments(rest, h)
+        skin = SkinnedGaussians.build(
+            asset.gaussians.means, asset.gaussians.quats, asset.skin_indices, asset.skin_weights
+        )
+        for f in range(len(frames)):
+            posed = lbs_positions(skin, transforms[f].astype(np.float32)).astype(np.float64)
+            a = np.einsum("sij,sj->si", transforms[f][owner, :, :3], start) + transforms[f][owner, :, 3]
+            b = np.einsum("sij,sj->si", transforms[f][owner, :, :3], end) + transforms[f][owner, :, 3]
+            gap = np.full(len(posed), np.inf)
+            for k in range(len(a)):
+                ab = b[k] - a[k]
+                u = np.clip((posed - a[k]) @ ab / max(ab @ ab, 1e-12), 0, 1)
+                d = np.linalg.norm(posed - (a[k] + u[:, None] * ab), axis=1) - thickness[owner[k]]
+                gap = np.minimum(gap, d)
+            assert gap.max() <= 0.03, (asset.avatar_id, int(frames[f]), float(gap.max()))
+
+
+def _silhouette(asset, cell: float = 0.02) -> np.ndarray:
+    """Front view occupancy (y, z) on a fixed 1.2 × 2.1 m grid, arms included."""
+    m = asset.gaussians.means
+    grid = np.zeros((int(2.1 / cell), int(1.2 / cell)), bool)
+    iz = np.clip((m[:, 2] / cell).astype(int), 0, grid.shape[0] - 1)
+    iy = np.clip(((m[:, 1] + 0.6) / cell).astype(int), 0, grid.shape[1] - 1)
+    grid[iz, iy] = True
+    return grid
+
+
+def test_silhouettes_vary(crowd_of_avatars) -> None:
+    masks = [_silhouette(a) for a in crowd_of_avatars]
+    ious = [(a & b).sum() / (a | b).sum() for a, b in itertools.combinations(masks, 2)]
+    assert max(ious) < 0.97 and float(np.median(ious)) < 0.85, (max(ious), float(np.median(ious)))

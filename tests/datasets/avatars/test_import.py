@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -85,3 +86,38 @@ def test_imported_avatar_faces_the_heading_and_feet_follow(make_scene, tmp_path)
         assert cosine > np.cos(np.radians(35))  # the feet point where the pedestrian walks
         offset = np.linalg.norm(posed[ankle] - motion.joints[f, JOINT_INDEX["left_ankle"]], axis=1)
         assert np.abs(offset - rest_offset).max() <= 0.03
+
+
+GUITAR = (
+    Path(__file__).resolve().parents[3].parent
+    / "shared"
+    / "sample_scenes"
+    / "playcanvas_splat"
+    / "guitar.compressed.ply"
+)
+
+
+def test_people_pass_the_plausibility_check_and_objects_do_not(tmp_path) -> None:
+    from song.datasets.avatars.generate import generate_avatar
+    from song.util import derive_rng
+
+    for i in range(4):  # procedural people of all builds, children included by seed
+        person = generate_avatar(derive_rng(2, "avatar", i), "p", 8_000)
+        height = float(np.ptp(person.gaussians.means[:, 2]))
+        import_ply_avatar(_foreign_ply(tmp_path, person), "imp", height_m=height)
+    # a thin upright object (a pole with a knob on top) scaled to a person's height
+    pole = capsule_avatar("pole", n=3000)
+    thin = pole.gaussians.means * np.array([0.2, 0.2, 1.0], np.float32)
+    path = _foreign_ply(tmp_path, replace(pole, gaussians=replace(pole.gaussians, means=thin)))
+    with pytest.raises(FormatError, match="shape: does not look like a standing person: hip width"):
+        import_ply_avatar(path, "pole", up="+y", forward="+z")
+    with pytest.raises(FormatError, match="force"):
+        import_ply_avatar(path, "pole", force=True)  # forcing needs the axes
+    forced = import_ply_avatar(path, "pole", up="+y", forward="+z", force=True)
+    assert len(forced) == 3000
+
+
+@pytest.mark.skipif(not GUITAR.exists(), reason="the guitar sample splat (../shared) is not present")
+def test_the_guitar_is_not_a_person() -> None:
+    with pytest.raises(FormatError, match="does not look like a standing person"):
+        import_ply_avatar(GUITAR, "guitar", height_m=1.75)

@@ -103,6 +103,17 @@ def test_persistent_500_falls_back_and_records(make_scene, tmp_path, monkeypatch
 
 
 @pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_an_oversized_reply_is_refused_and_falls_back(make_scene, tmp_path, monkeypatch, kind) -> None:
+    from song.pipeline.intents.llm import MAX_REPLY_BYTES
+
+    huge = json.dumps({"description": "x" * (MAX_REPLY_BYTES + 10)})
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [(200, huge, 0)] * 3)
+    assert result.provenance.fallback and result.intents  # the offline model stood in
+    assert "over the 262,144-byte limit" in result.llm_error
+    assert len(server.requests) == 1  # a refused size is not retried
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
 def test_malformed_json_is_repaired(make_scene, tmp_path, monkeypatch, kind) -> None:
     result, server = _run(
         make_scene, tmp_path, monkeypatch, kind, [(200, "{not json", 0), (200, DESC, 0), (200, GOOD, 0)]
