@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 
 from song.geometry.rotations import _xp, quat_to_matrix
@@ -37,6 +38,8 @@ def forward_kinematics_matrices(
         ``joints (..., J, 3)`` world positions and ``global_rots (..., J, 3, 3)``.
     """
     xp = _xp(local_rots)
+    if xp is np:
+        return _fk_numpy(np.asarray(rest_joints), np.asarray(local_rots), np.asarray(root_pos), parents)
     n = len(parents)
     offsets = rest_joints[..., 1:, :] - rest_joints[..., parents[1:], :]
     rots: list[Any] = [local_rots[..., 0, :, :]]
@@ -49,6 +52,44 @@ def forward_kinematics_matrices(
     if xp is np:
         return np.stack(pos, axis=-2), np.stack(rots, axis=-3)
     return xp.stack(pos, dim=-2), xp.stack(rots, dim=-3)
+
+
+@numba.njit(cache=True, nogil=True)
+def _fk_kernel(rest, local, root, parents):  # pragma: no cover - compiled
+    """(B, J, 3) rest, (B, J, 3, 3) local, (B, 3) root → joints (B, J, 3), global rotations (B, J, 3, 3)."""
+    b_count, n = local.shape[0], local.shape[1]
+    joints = np.empty((b_count, n, 3))
+    rots = np.empty((b_count, n, 3, 3))
+    for b in range(b_count):
+        rots[b, 0] = local[b, 0]
+        joints[b, 0] = root[b]
+        for j in range(1, n):
+            p = parents[j]
+            for r in range(3):
+                acc = 0.0
+                for c in range(3):
+                    acc += rots[b, p, r, c] * (rest[b, j, c] - rest[b, p, c])
+                    s = 0.0
+                    for k in range(3):
+                        s += rots[b, p, r, k] * local[b, j, k, c]
+                    rots[b, j, r, c] = s
+                joints[b, j, r] = joints[b, p, r] + acc
+    return joints, rots
+
+
+def _fk_numpy(rest_joints: np.ndarray, local_rots: np.ndarray, root_pos: np.ndarray, parents: np.ndarray):
+    """:func:`forward_kinematics_matrices` for numpy arrays, compiled.
+
+    numpy's batched 3 × 3 products cost more in dispatch than in arithmetic (FK was the motion stage's
+    largest single cost); tests compare it with :mod:`song.geometry._fk_reference` and the torch path.
+    """
+    batch = local_rots.shape[:-3]
+    n = local_rots.shape[-3]
+    local = np.ascontiguousarray(local_rots, dtype=np.float64).reshape(-1, n, 3, 3)
+    rest = np.ascontiguousarray(np.broadcast_to(rest_joints, (*batch, n, 3)), dtype=np.float64).reshape(-1, n, 3)
+    root = np.ascontiguousarray(np.broadcast_to(root_pos, (*batch, 3)), dtype=np.float64).reshape(-1, 3)
+    joints, rots = _fk_kernel(rest, local, root, np.asarray(parents, dtype=np.int64))
+    return joints.reshape(*batch, n, 3), rots.reshape(*batch, n, 3, 3)
 
 
 def forward_kinematics(

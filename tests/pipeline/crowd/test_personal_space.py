@@ -102,3 +102,18 @@ def test_no_contact_with_a_pedestrian_stopped_mid_route(tmp_path: Path) -> None:
     k = list(plan.ped_ids).index(0)
     at_stop = np.linalg.norm(plan.xy[k] - np.array([6.0, 4.0]), axis=-1) < 0.1
     assert at_stop.sum() / plan.fps >= 19.0  # it really dwelt there
+
+
+def test_compiled_anticipation_equals_its_reference_twin() -> None:
+    from song.pipeline.crowd._avoidance_reference import anticipate_reference
+    from song.pipeline.crowd.avoidance import anticipate
+
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 7, 30):
+        pos = rng.uniform(0, 8, (n, 2))
+        vel = rng.normal(0, 0.8, (n, 2))
+        pref = rng.normal(0, 1.0, (n, 2))
+        pref[rng.random(n) < 0.3] = 0.0  # some stand
+        np.testing.assert_allclose(
+            anticipate(pos, vel, pref, 1.0, 4.0), anticipate_reference(pos, vel, pref, 1.0, 4.0), atol=1e-12
+        )
