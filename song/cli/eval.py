@@ -80,3 +80,28 @@ def eval_command(
     text = markdown_table(table)
     (out / "results.md").write_text(text, encoding="utf-8")
     typer.echo(text)
+
+
+@app.command("collect")
+@handle_errors
+def collect_command(
+    bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
+    out: Path = typer.Option(..., "--out", help="dataset folder to create (LeRobot layout)"),
+    policy: str = typer.Option(
+        "social", "--policy", help="the expert: straight | astar | social | depth | module:Class"
+    ),
+    split: str = typer.Option("train", "--split", help="which split's episodes (train | val | test)"),
+    sensors: str = typer.Option(
+        "state", "--sensors", help="what to record, comma-separated: state, scan, pedestrians, depth, rgb"
+    ),
+    resolution: str = typer.Option("160x120", "--resolution", metavar="WxH", help="camera image size"),
+    limit: int | None = typer.Option(None, "--limit", min=1, help="only the first N episodes of the split"),
+) -> None:
+    """Roll a policy out on training episodes; write what imitation learning needs (LeRobot dataset layout)."""
+    from song.runtime.collect import collect
+
+    width, height = parse_size(resolution, "--resolution")
+    summary = collect(bench, policy, out, split, tuple(sensors.split(",")), limit, {"width": width, "height": height})
+    console.print(
+        f"wrote {summary.out}: {summary.episodes} episodes, {summary.frames} steps, {summary.successes} successes"
+    )

@@ -240,3 +240,56 @@ def test_next_export_removes_a_killed_exports_temporary_folder(graded_run, tmp_p
     export_bench(graded_run(), tmp_path / "bench", "1.0.0")
     assert not leftover.exists()
     assert [p.name for p in (tmp_path / "bench").iterdir()] == ["1.0.0"]
+
+
+def test_collect_writes_a_lerobot_dataset_from_the_training_split(graded_run, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    run = graded_run()
+    manifest = run / "manifest" / "episodes.parquet"
+    table = pq.read_table(manifest)
+    split = ["train" if s == "scene_1" else "test" for s in table.column("scene_id").to_pylist()]
+    pq.write_table(table.append_column("split", pa.array(split)), manifest)
+    release = export_bench(run, tmp_path / "bench", "1.0.0").path
+    outs = []
+    for name in ("dataset_a", "dataset_b"):
+        out = tmp_path / name
+        args = ["collect", "--bench", str(release), "--out", str(out), "--policy", "social", "--limit", "2"]
+        result = CliRunner().invoke(app, [*args, "--sensors", "state,depth,rgb", "--resolution", "64x48"])
+        assert result.exit_code == 0, result.output
+        outs.append(out)
+    out = outs[0]
+    info = json.loads((out / "meta" / "info.json").read_text())
+    assert info["codebase_version"] == "v2.1" and info["total_episodes"] == 2 and info["splits"] == {"train": "0:2"}
+    features = info["features"]
+    assert features["observation.state"]["shape"] == [10] and features["action"]["names"] == ["v", "omega"]
+    assert features["observation.images.rgb"]["dtype"] == "video" and features["observation.depth"]["shape"] == [
+        64 * 48
+    ]
+    episodes = [json.loads(line) for line in (out / "meta" / "episodes.jsonl").read_text().splitlines()]
+    assert [e["episode_index"] for e in episodes] == [0, 1] and all(
+        e["song_episode_id"].startswith("scene_1") for e in episodes
+    )
+    frames = 0
+    for e in episodes:
+        data = pq.read_table(out / info["data_path"].format(episode_chunk=0, episode_index=e["episode_index"]))
+        assert data.num_rows == e["length"] and data.column("next.done").to_pylist()[-1] is True
+        assert data.column("index").to_pylist()[0] == frames  # global frame index runs across episodes
+        rewards = np.array(data.column("next.reward").to_pylist())
+        parts = np.array(data.column("reward.progress").to_pylist()) + np.array(
+            data.column("reward.terminal").to_pylist()
+        )
+        np.testing.assert_allclose(rewards, parts, atol=1e-6)
+        assert (
+            out
+            / info["video_path"].format(
+                episode_chunk=0, video_key="observation.images.rgb", episode_index=e["episode_index"]
+            )
+        ).stat().st_size > 0
+        frames += data.num_rows
+    assert info["total_frames"] == frames
+    assert _files(outs[0]) == _files(outs[1])  # deterministic, byte for byte
+    again = CliRunner().invoke(app, ["collect", "--bench", str(release), "--out", str(out)])
+    assert again.exit_code != 0 and "not empty" in again.output
