@@ -25,8 +25,10 @@ from song.pipeline.motion import ProceduralGait, read_trajectories  # noqa: E402
 from song.pipeline.motion.postprocess import postprocess  # noqa: E402
 from song.pipeline.motion.quality import (  # noqa: E402
     CADENCE_AT_1_3_SPM,
+    HEADING_SEGMENTS,
     NORMATIVE,
     gait_cycle_figures,
+    heading_leads,
     motion_quality,
 )
 from song.pipeline.motion.synthetic import steady_walk, synthetic_trajectories  # noqa: E402
@@ -207,10 +209,15 @@ def main() -> None:
     files = sorted(p for run in args.runs if run.exists() for p in (run / "scenes").glob("*/crowd.parquet"))
     if args.quick:
         files = files[:1]
+    leads: dict[str, list[float]] = {name: [] for name in HEADING_SEGMENTS}
     for path in files:
         for traj in read_trajectories(path):
-            quality, cpu, _ = _measure(traj, derive_seed("bench", path.parent.name, traj.ped_id), cfg)
+            quality, cpu, motion = _measure(traj, derive_seed("bench", path.parent.name, traj.ped_id), cfg)
             groups["crowd"].append((quality, cpu, traj.t[-1] - traj.t[0] + 1 / 30))
+            found = heading_leads(motion.local_quats, motion.rest_joints, motion.root_pos, traj.xy, traj.t)
+            for name, value in found.items():
+                if value is not None:
+                    leads[name].append(value)
     result: dict = {"targets": {k: f"{op} {v}" for k, (op, v) in TARGETS.items()}}
     for name, rows in groups.items():
         if not rows:
@@ -236,6 +243,16 @@ def main() -> None:
             "all_ok": all(c["ok"] for c in checks.values()),
             "quality": summary,
         }
+    result["heading_lead_s"] = {  # > 0: the segment turns before the path (people: head ~0.2 s first)
+        name: {
+            "median": round(float(np.median(v)), 3),
+            "p25": round(float(np.percentile(v, 25)), 3),
+            "p75": round(float(np.percentile(v, 75)), 3),
+            "pedestrians": len(v),
+        }
+        for name, v in leads.items()
+        if v
+    }
     result["crowd_files"] = [str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p) for p in files]
     if args.figure:
         figure(args.figure, cfg)

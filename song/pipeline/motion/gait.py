@@ -66,6 +66,9 @@ _HEEL_STRIKE_DEG = 10.0  # foot pitch at touchdown (toes up)
 # second half, so the knee flexes most in initial swing and extends while the foot reaches forward
 # (peak knee flexion at ~70-75 % of the cycle, hip flexion ~30° at terminal swing: Perry & Burnfield 2010).
 SWING_LIFT_RISE, SWING_LIFT_FALL = 0.2, 0.3
+# Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
+# trunk and the pelvis (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999, Exp. Brain Res. 129:629).
+HEAD_LEAD_S, TRUNK_LEAD_S, PELVIS_LEAD_S = 0.25, 0.1, 0.05
 
 
 @dataclass(frozen=True)
@@ -148,10 +151,30 @@ class _Plan:
         return x, y, float(np.interp(time, self.t, self.heading))
 
 
+def _path_yaw(traj: Trajectory) -> np.ndarray:
+    """The direction of travel where the plan walks, its recorded yaw where it stands (blended by speed).
+
+    The crowd's yaw is a smoothed velocity heading that trails the path by ~0.1–0.3 s; a centred
+    derivative of the planned positions does not, and it knows the turn that is coming.
+    """
+    if len(traj.t) < 3:
+        return np.asarray(traj.yaw, dtype=np.float64)
+    vel = gaussian_filter1d(np.gradient(traj.xy, traj.t, axis=0), 2.0, axis=0, mode="nearest")
+    speed = np.linalg.norm(vel, axis=1)
+    direction = np.arctan2(vel[:, 1], vel[:, 0])
+    weight = np.clip((speed - 0.1) / 0.3, 0.0, 1.0)
+    return traj.yaw + weight * wrap_angle(direction - traj.yaw)
+
+
+def _ahead(signal: np.ndarray, t: np.ndarray, lead_s: float) -> np.ndarray:
+    """``signal`` read ``lead_s`` seconds later (held at the end): a segment that turns before the path."""
+    return np.interp(t + lead_s, t, signal)
+
+
 def _plan_signals(traj: Trajectory) -> _Plan:
     t = traj.t
     dt = 1.0 / traj.fps
-    heading = gaussian_filter1d(body_heading(traj.yaw, t), 2.0, mode="nearest")
+    heading = gaussian_filter1d(body_heading(_path_yaw(traj), t), 2.0, mode="nearest")
     if len(t) > 1:
         vel = np.gradient(traj.xy, t, axis=0)
         speed = gaussian_filter1d(np.linalg.norm(vel, axis=1), 2.0, mode="nearest")
@@ -370,7 +393,8 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     pelvic_list = walk * np.radians(3.0) * np.cos(np.pi * (phase - 1.4))
     turn_roll = -np.clip(0.8 * np.arctan(speed * plan.yaw_rate / _GRAVITY), -0.17, 0.17)
     lean = np.radians(style.lean_deg)
-    rot_pelvis = rot_z(heading + yaw_osc) @ rot_x(pelvic_list + 0.3 * turn_roll) @ rot_y(0.3 * lean * walk)
+    pelvis_heading = _ahead(heading, t, PELVIS_LEAD_S)
+    rot_pelvis = rot_z(pelvis_heading + yaw_osc) @ rot_x(pelvic_list + 0.3 * turn_roll) @ rot_y(0.3 * lean * walk)
     pelvis = np.empty((n, 3))
     pelvis[:, :2] = traj.xy + sway[:, None] * left
     breathing = np.sin(2 * np.pi * 0.25 * t + style.idle_phase)
@@ -409,15 +433,11 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
 
     # trunk, head, arms
     chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
-    rot_chest = rot_z(heading - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
+    rot_chest = rot_z(_ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
     for name, w in (("spine1", 1 / 3), ("spine2", 2 / 3)):
         glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
     glob[:, J["spine3"]] = rot_chest
-    look = (
-        heading
-        + np.clip(0.3 * plan.yaw_rate, -0.4, 0.4)
-        + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
-    )
+    look = _ahead(heading, t, HEAD_LEAD_S) + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
     rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(np.full(n, np.radians(style.head_pitch_deg)))
     glob[:, J["head"]] = rot_head
     glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)

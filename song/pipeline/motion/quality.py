@@ -189,3 +189,45 @@ def gait_cycle_figures(local_quats: np.ndarray, contacts: np.ndarray, t: np.ndar
     if not rows:
         return {}
     return {key: round(float(np.median([r[key] for r in rows])), 4) for key in rows[0]} | {"strides": len(rows)}
+
+
+HEADING_SEGMENTS = ("head", "spine3", "pelvis")
+LEAD_WINDOW_S = 1.0  # leads are searched within ±1 s
+LEAD_MIN_SPEED = 0.3  # only walking frames count
+
+
+def heading_leads(
+    local_quats: np.ndarray, rest_joints: np.ndarray, root_pos: np.ndarray, xy: np.ndarray, t: np.ndarray
+) -> dict[str, float | None]:
+    """How far ahead (s) the head, thorax and pelvis turn compared with the walked path.
+
+    The lag that best aligns each segment's yaw rate with the path direction's yaw rate (the direction
+    of the planned velocity) over the walking frames, by cross-correlation within ±``LEAD_WINDOW_S``;
+    positive when the segment turns first. People turn the head ~0.2 s before the path in walking
+    turns, trunk and pelvis a little later (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999,
+    Exp. Brain Res. 129:629). None when the walk holds no turn to measure.
+    """
+    from song.geometry.fk import forward_kinematics
+
+    fps = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 30.0
+    vel = np.gradient(xy, t, axis=0) if len(t) > 2 else np.zeros_like(xy)
+    speed = np.linalg.norm(vel, axis=1)
+    path = np.unwrap(np.arctan2(vel[:, 1], vel[:, 0]))
+    walking = speed > LEAD_MIN_SPEED
+    path_rate = np.where(walking, np.gradient(path, t), 0.0) if len(t) > 2 else np.zeros(len(t))
+    out: dict[str, float | None] = {name: None for name in HEADING_SEGMENTS}
+    if np.abs(path_rate).max(initial=0.0) < 0.3:  # no turn faster than ~17°/s
+        return out
+    _, rots = forward_kinematics(rest_joints.astype(np.float64), local_quats.astype(np.float64), root_pos)
+    window = int(round(LEAD_WINDOW_S * fps))
+    for name in HEADING_SEGMENTS:
+        seg = np.unwrap(np.arctan2(rots[:, J[name], 1, 0], rots[:, J[name], 0, 0]))
+        rate = np.where(walking, np.gradient(seg, t), 0.0)
+        best, lag = -np.inf, 0
+        for k in range(-window, window + 1):  # segment at frame i aligns with the path at i + k
+            a, b = (rate[: len(rate) - k], path_rate[k:]) if k >= 0 else (rate[-k:], path_rate[: len(rate) + k])
+            score = float(a @ b)
+            if score > best:
+                best, lag = score, k
+        out[name] = round(lag / fps, 3)
+    return out

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -206,3 +208,21 @@ def test_walk_ratio_and_cadence_follow_speed(cycle_figures) -> None:
     assert 100.0 <= cycle_figures[1.3]["cadence_spm"] <= 120.0
     cadence = [cycle_figures[v]["cadence_spm"] for v in sorted(cycle_figures)]
     assert all(np.diff(cadence) > 0)  # faster walkers take faster steps too
+
+
+def test_head_trunk_and_pelvis_turn_before_the_path() -> None:
+    """Anticipatory steering: a 90° walking turn; the head leads by ~0.25 s, then the trunk, then the
+    pelvis, none lagging (crowd yaw lags the path; the gait reads the direction from the positions)."""
+    from song.pipeline.motion.quality import heading_leads
+    from song.pipeline.motion.synthetic import trajectory_from_profiles
+
+    n, start, frames = 300, 120, 32
+    yaw_rate = np.zeros(n)
+    yaw_rate[start : start + frames] = (np.pi / 2) / (frames / 30.0)
+    traj = trajectory_from_profiles(0, np.full(n, 1.2), yaw_rate)
+    lagging = dataclasses.replace(traj, yaw=np.concatenate([np.full(6, traj.yaw[0]), traj.yaw[:-6]]))  # 0.2 s late
+    for plan in (traj, lagging):
+        motion = ProceduralGait(CFG).generate([plan], [""], [5])[0]
+        leads = heading_leads(motion.local_quats, motion.rest_joints, motion.root_pos, plan.xy, plan.t)
+        assert 0.18 <= leads["head"] <= 0.32, leads
+        assert leads["head"] > leads["spine3"] > leads["pelvis"] >= 0.0, leads
