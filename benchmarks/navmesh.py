@@ -40,6 +40,7 @@ from song.config import SongConfig  # noqa: E402
 from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.geometry._navmesh_reference import (  # noqa: E402
     grid_path_length,
+    points_on_mesh,
     visibility_edges_reference,
     visibility_path_reference,
 )
@@ -53,23 +54,11 @@ ROOMS = [(10.0, 6), (20.0, 25), (40.0, 100)]
 CELL_M, RADIUS_M = 0.05, 0.25
 
 
-def sample_on_mesh(mesh, n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n, 2) points uniform over the mesh's area."""
-    t = mesh.vertices[mesh.triangles]
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    k = rng.choice(len(t), n, p=area / area.sum())
-    u, v = rng.random((2, n))
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    return t[k, 0] + u[:, None] * e1[k] + v[:, None] * e2[k]
-
-
 def pairs_in_one_part(mesh, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """n start/goal pairs on the mesh, both ends of a pair on the same connected part."""
     starts, goals = [], []
     while len(starts) < n:
-        p, q = sample_on_mesh(mesh, 2 * n, rng), sample_on_mesh(mesh, 2 * n, rng)
+        p, q = points_on_mesh(mesh, 2 * n, rng), points_on_mesh(mesh, 2 * n, rng)
         same = mesh.component[mesh.locate(p)] == mesh.component[mesh.locate(q)]
         starts.extend(p[same])
         goals.extend(q[same])

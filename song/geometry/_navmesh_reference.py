@@ -21,6 +21,18 @@ from song.geometry.navmesh import Navmesh, _component_rings, _cross, _ring_links
 STEPS_16 = [(1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)]
 
 
+def points_on_mesh(mesh: Navmesh, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n, 2) points drawn uniformly over the mesh's area (for tests and benchmarks)."""
+    t = mesh.vertices[mesh.triangles]
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    k = rng.choice(len(t), n, p=area / area.sum())
+    u, v = rng.random((2, n))
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    return t[k, 0] + u[:, None] * e1[k] + v[:, None] * e2[k]
+
+
 def segment_clear_reference(mesh: Navmesh, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(N,) bool: segments p→q (shortened by SHORTEN_M at both ends) hit no boundary segment."""
     p, q = np.atleast_2d(p).astype(np.float64), np.atleast_2d(q).astype(np.float64)

@@ -19,6 +19,7 @@ from shapely.geometry import LineString
 from song.geometry import _navmesh_kernel as _k
 from song.geometry._navmesh_reference import (
     mesh_polygons,
+    points_on_mesh,
     segment_clear_reference,
     visibility_edges_reference,
     visibility_path_reference,
@@ -59,17 +60,6 @@ def furnished_grid(seed: int, size: float = 12.0) -> np.ndarray:
 def grid_mesh(seed: int):
     free = furnished_grid(seed)
     return free, build_navmesh(erode(free, RES, RADIUS), RES, (0.0, 0.0), RADIUS, EPS)
-
-
-def on_mesh_points(mesh, n: int, rng: np.random.Generator) -> np.ndarray:
-    t = mesh.vertices[mesh.triangles]
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    k = rng.choice(len(t), n, p=area / area.sum())
-    u, v = rng.random((2, n))
-    flip = u + v > 1
-    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    return t[k, 0] + u[:, None] * e1[k] + v[:, None] * e2[k]
 
 
 def assert_parts_agree(free: np.ndarray, mesh, res: float, origin=(0.0, 0.0)) -> None:
@@ -132,13 +122,13 @@ def test_compiled_queries_equal_reference_twin(seed: int) -> None:
     rng = np.random.default_rng(seed)
     np.testing.assert_array_equal(mesh.vis_edges, visibility_edges_reference(mesh))
     # rays: random segments, and segments ending exactly on boundary vertices
-    p = on_mesh_points(mesh, 300, rng)
-    q = np.vstack([on_mesh_points(mesh, 200, rng), mesh.vertices[rng.integers(0, len(mesh.vertices), 100)]])
+    p = points_on_mesh(mesh, 300, rng)
+    q = np.vstack([points_on_mesh(mesh, 200, rng), mesh.vertices[rng.integers(0, len(mesh.vertices), 100)]])
     np.testing.assert_array_equal(mesh.segment_clear(p, q), segment_clear_reference(mesh, p, q))
     # paths: equal lengths (the same graph, searched by A* instead of Dijkstra), inside the mesh
     region = shapely.union_all(mesh_polygons(mesh)).buffer(1e-7)
     assert all(p.is_valid for p in mesh_polygons(mesh))
-    starts, goals = on_mesh_points(mesh, 40, rng), on_mesh_points(mesh, 40, rng)
+    starts, goals = points_on_mesh(mesh, 40, rng), points_on_mesh(mesh, 40, rng)
     same = mesh.component[mesh.locate(starts)] == mesh.component[mesh.locate(goals)]
     lengths = mesh.distances(starts[0], goals)
     for i in np.flatnonzero(same):

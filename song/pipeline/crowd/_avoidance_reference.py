@@ -10,17 +10,7 @@ from song.pipeline.crowd.avoidance import ANTICIPATION_GAIN, ANTICIPATION_MARGIN
 def anticipate_reference(
     positions: np.ndarray, velocities: np.ndarray, preferred: np.ndarray, comfort_distance: float, horizon: float
 ) -> np.ndarray:
-    """Reference twin of :func:`song.pipeline.crowd.avoidance.anticipate` (vectorised numpy, same arithmetic).
-
-    Preferred velocities bent aside, early, from people who would pass closer than the comfort distance.
-
-    For each walker and each other pedestrian the closest approach is predicted with constant
-    velocities (the walker at its preferred velocity) within ``horizon``; when it falls short of
-    ``comfort_distance`` the walker's preferred direction gains a sideways component away from where
-    the other will be, stronger the shorter the miss and the sooner it comes. The speed is unchanged.
-    The crowd's hard constraints (ORCA at the body radius, walls, overlap resolution) still decide the
-    velocity, so in a passage too narrow for comfort people simply pass at their body distance.
-    """
+    """Reference twin of :func:`song.pipeline.crowd.avoidance.anticipate` (vectorised numpy, same arithmetic)."""
     speed = np.hypot(preferred[:, 0], preferred[:, 1])
     walking = np.flatnonzero(speed > 1e-6)
     if len(positions) < 2 or not len(walking):

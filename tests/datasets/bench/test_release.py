@@ -201,16 +201,21 @@ def test_habitat_projection(graded_run, tmp_path: Path) -> None:
     shutil.rmtree(release)
 
 
+def _scene_1_for_training(run: Path) -> Path:
+    """The graded run with scene_1's episodes moved to the train split (scene_0's stay test)."""
+    manifest = run / "manifest" / "episodes.parquet"
+    table = pq.read_table(manifest)
+    split = ["train" if s == "scene_1" else "test" for s in table.column("scene_id").to_pylist()]
+    pq.write_table(table.append_column("split", pa.array(split)), manifest)
+    return run
+
+
 def test_splits_in_the_release_and_eval_defaults_to_test(graded_run, tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
     from song.cli import app
 
-    run = graded_run()
-    manifest = run / "manifest" / "episodes.parquet"
-    table = pq.read_table(manifest)
-    split = ["train" if s == "scene_1" else "test" for s in table.column("scene_id").to_pylist()]
-    pq.write_table(table.append_column("split", pa.array(split)), manifest)
+    run = _scene_1_for_training(graded_run())
     release = bench.open(export_bench(run, tmp_path / "bench", "1.0.0").path)
     assert release.splits() == {"train", "test"}
     assert {e.scene_id for e in release.episodes(split="train")} == {"scene_1"}
@@ -247,11 +252,7 @@ def test_collect_writes_a_lerobot_dataset_from_the_training_split(graded_run, tm
 
     from song.cli import app
 
-    run = graded_run()
-    manifest = run / "manifest" / "episodes.parquet"
-    table = pq.read_table(manifest)
-    split = ["train" if s == "scene_1" else "test" for s in table.column("scene_id").to_pylist()]
-    pq.write_table(table.append_column("split", pa.array(split)), manifest)
+    run = _scene_1_for_training(graded_run())
     release = export_bench(run, tmp_path / "bench", "1.0.0").path
     outs = []
     for name in ("dataset_a", "dataset_b"):
