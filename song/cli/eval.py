@@ -96,12 +96,16 @@ def collect_command(
     ),
     resolution: str = typer.Option("160x120", "--resolution", metavar="WxH", help="camera image size"),
     limit: int | None = typer.Option(None, "--limit", min=1, help="only the first N episodes of the split"),
+    keep: str = typer.Option("success", "--keep", help="success (only successful rollouts) | all"),
+    workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
 ) -> None:
     """Roll a policy out on training episodes; write what imitation learning needs (LeRobot dataset layout)."""
     from song.runtime.collect import collect
 
     width, height = parse_size(resolution, "--resolution")
-    summary = collect(bench, policy, out, split, tuple(sensors.split(",")), limit, {"width": width, "height": height})
+    camera = {"width": width, "height": height}
+    summary = collect(bench, policy, out, split, tuple(sensors.split(",")), limit, camera, keep, workers)
     console.print(
-        f"wrote {summary.out}: {summary.episodes} episodes, {summary.frames} steps, {summary.successes} successes"
+        f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "
+        f"{summary.frames} steps"
     )

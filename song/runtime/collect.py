@@ -15,10 +15,13 @@ Per step: the chosen sensors' observations *before* the action (``state`` → ``
 time; ``scan``, ``pedestrians`` → flat vectors; ``depth`` → ``observation.depth``, metres, float16,
 flattened row-major; ``rgb`` → a video), the action ``[v, ω]`` as executed (clipped to the robot's
 limits), the reward terms of the Gymnasium env (progress toward the goal, ±10 at success / collision)
-and their sum, and the done flags. Rows of an episode that ended by collision or time-out are kept
-(``next.success`` says which ones succeeded; filter them for behaviour cloning).
+and their sum, and the done flags. By default only successful rollouts are written (``keep="success"``,
+what behaviour cloning wants); ``keep="all"`` writes every one (``next.success`` tells them apart).
+Episodes roll out in parallel worker processes and are written in release order.
 
-Deterministic: the same release, policy and options give byte-identical files (x264 single-threaded).
+Deterministic: the same release, policy and options give byte-identical files whatever the worker
+count (x264 runs single-threaded). Checked against the layout as LeRobot documents it (the ``lerobot``
+package itself pulls a large dependency tree that is not installed here).
 """
 
 from __future__ import annotations
@@ -55,25 +58,26 @@ class CollectSummary:
     """What a collection wrote."""
 
     out: Path
-    episodes: int
-    frames: int
-    successes: int
+    episodes: int  # written
+    frames: int  # steps written
+    successes: int  # successful rollouts (written or not)
+    rollouts: int
 
 
 def _flat_state(obs: dict[str, np.ndarray]) -> np.ndarray:
     return np.concatenate([obs["pose"], obs["velocity"], obs["goal"], obs["goal_polar"], obs["t"]]).astype(np.float32)
 
 
-def _features(observation: dict[str, Any], sensors: tuple[str, ...], fps: float) -> dict[str, dict]:
-    """LeRobot feature declarations, shapes read from the first observation."""
+def _features(episode: dict[str, np.ndarray], sensors: tuple[str, ...], fps: float) -> dict[str, dict]:
+    """LeRobot feature declarations, shapes read from the first collected episode."""
     out: dict[str, dict] = {}
     if "state" in sensors:
         out["observation.state"] = {"dtype": "float32", "shape": [len(STATE_NAMES)], "names": STATE_NAMES}
     for name in ("scan", "pedestrians"):
         if name in sensors:
-            out[f"observation.{name}"] = {"dtype": "float32", "shape": [int(np.size(observation[name]))], "names": None}
+            out[f"observation.{name}"] = {"dtype": "float32", "shape": [int(episode[name].shape[1])], "names": None}
     if "depth" in sensors:
-        h, w = np.shape(observation["depth"])
+        h, w = episode["depth_hw"]
         out["observation.depth"] = {
             "dtype": "float16",
             "shape": [h * w],
@@ -81,7 +85,7 @@ def _features(observation: dict[str, Any], sensors: tuple[str, ...], fps: float)
             "info": {"height": h, "width": w, "unit": "m"},
         }
     if "rgb" in sensors:
-        h, w = np.shape(observation["rgb"])[:2]
+        h, w = episode["rgb"].shape[1:3]
         out["observation.images.rgb"] = {
             "dtype": "video",
             "shape": [h - h % 2, w - w % 2, 3],
@@ -89,64 +93,103 @@ def _features(observation: dict[str, Any], sensors: tuple[str, ...], fps: float)
             "info": {"video.fps": fps, "video.codec": "h264", "video.pix_fmt": "yuv420p", "has_audio": False},
         }
     out["action"] = {"dtype": "float32", "shape": [2], "names": ["v", "omega"]}
-    for name in ("next.reward", "reward.progress", "reward.terminal"):
+    for name in ("next.reward", "reward.progress", "reward.terminal", "timestamp"):
         out[name] = {"dtype": "float32", "shape": [1], "names": None}
     for name in ("next.done", "next.success"):
         out[name] = {"dtype": "bool", "shape": [1], "names": None}
-    for name in ("timestamp",):
-        out[name] = {"dtype": "float32", "shape": [1], "names": None}
     for name in ("frame_index", "episode_index", "index", "task_index"):
         out[name] = {"dtype": "int64", "shape": [1], "names": None}
     return out
 
 
-def _rollout(episode, policy, sensors: SensorSuite, step_timeout_s: float) -> tuple[list[dict], list[np.ndarray], str]:
-    """Run one episode; per step the observation before acting, the action, the reward terms, done flags."""
-    runner = EpisodeRunner(episode, make_collider(episode), sensors)
-    rows, frames = [], []
+@dataclass(frozen=True)
+class CollectJob:
+    """One episode to roll out (picklable for worker processes)."""
+
+    bench: str
+    episode_id: str
+    policy: str
+    sensors: tuple[str, ...]
+    camera: dict[str, Any]
+    step_timeout_s: float
+
+
+def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:  # noqa: B006 - per-process cache
+    """Roll one episode out: per step the observation before acting, the executed action, reward terms."""
+    if job.bench not in cache:
+        cache[job.bench] = open_benchmark(job.bench)
+    bench = cache[job.bench]
+    episode = dataclasses.replace(bench.episode(job.episode_id), params=bench.params)
+    policy = load_policy(job.policy)
+    names = tuple(dict.fromkeys([*policy_sensors(policy), *job.sensors]))
+    suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, {"camera": dict(job.camera)})
+    runner = EpisodeRunner(episode, make_collider(episode), suite)
+    steps: dict[str, list] = {
+        k: [] for k in ("state", "scan", "pedestrians", "depth", "rgb", "action", "progress", "terminal")
+    }
     try:
-        call_policy(policy.reset, frozen_copy(episode), what="reset()", timeout_s=step_timeout_s)
+        call_policy(policy.reset, frozen_copy(episode), what="reset()", timeout_s=job.step_timeout_s)
         while runner.outcome is None:
             obs = runner.observation()
-            action = call_policy(policy.act, obs, what="act()", timeout_s=step_timeout_s)
+            action = call_policy(policy.act, obs, what="act()", timeout_s=job.step_timeout_s)
             before = float(np.linalg.norm(runner.pose.xy - episode.goal_xy))
             outcome = runner.step(*as_command(action))
             after = float(np.linalg.norm(runner.pose.xy - episode.goal_xy))
-            terminal = (
-                SUCCESS_REWARD if outcome == "success" else -SUCCESS_REWARD if outcome in ("obstacle", "human") else 0.0
-            )
-            rows.append(
-                {"obs": obs, "action": np.asarray(runner.command, np.float32), "progress": before - after, "terminal": terminal,
-                 "done": outcome is not None}
-            )  # fmt: skip
-            if "rgb" in obs:
-                frames.append(obs["rgb"])
+            failed = outcome in ("obstacle", "human")
+            steps["terminal"].append(SUCCESS_REWARD if outcome == "success" else -SUCCESS_REWARD if failed else 0.0)
+            steps["progress"].append(before - after)
+            steps["action"].append(np.asarray(runner.command, np.float32))
+            if "state" in job.sensors:
+                steps["state"].append(_flat_state(obs["state"]))
+            for name in ("scan", "pedestrians"):
+                if name in job.sensors:
+                    steps[name].append(np.asarray(obs[name], np.float32).ravel())
+            if "depth" in job.sensors:
+                steps["depth"].append(np.asarray(obs["depth"], np.float16))
+            if "rgb" in job.sensors:
+                steps["rgb"].append(np.asarray(obs["rgb"], np.uint8))
     except PolicyFailure as exc:
         runner.fail(str(exc))
-    return rows, frames, runner.outcome or "error"
+    out: dict[str, Any] = {"episode_id": job.episode_id, "difficulty": episode.difficulty, "outcome": runner.outcome}
+    for name, values in steps.items():
+        if values:
+            out[name] = np.stack(values)
+    if "depth" in out:
+        out["depth_hw"] = out["depth"].shape[1:]
+        out["depth"] = out["depth"].reshape(len(out["depth"]), -1)
+    out["steps"] = len(steps["action"])
+    return out
 
 
-def _table(rows: list[dict], sensors: tuple[str, ...], episode_index: int, first_index: int, fps: float, success: bool):
+def _table(episode: dict[str, Any], sensors: tuple[str, ...], episode_index: int, first_index: int, fps: float):
     import pyarrow as pa
 
-    n = len(rows)
+    n = episode["steps"]
+    success = episode["outcome"] == "success"
     cols: dict[str, Any] = {}
     if "state" in sensors:
-        cols["observation.state"] = [_flat_state(r["obs"]["state"]).tolist() for r in rows]
+        cols["observation.state"] = pa.FixedSizeListArray.from_arrays(
+            pa.array(episode["state"].ravel()), len(STATE_NAMES)
+        )
     for name in ("scan", "pedestrians"):
         if name in sensors:
-            cols[f"observation.{name}"] = [np.asarray(r["obs"][name], np.float32).ravel().tolist() for r in rows]
+            cols[f"observation.{name}"] = pa.FixedSizeListArray.from_arrays(
+                pa.array(episode[name].ravel()), episode[name].shape[1]
+            )
     if "depth" in sensors:
-        depth = np.stack([np.asarray(r["obs"]["depth"], np.float16).ravel() for r in rows])
-        cols["observation.depth"] = pa.FixedSizeListArray.from_arrays(pa.array(depth.ravel()), depth.shape[1])
-    cols["action"] = [r["action"].tolist() for r in rows]
-    progress = np.array([r["progress"] for r in rows], np.float32)
-    terminal = np.array([r["terminal"] for r in rows], np.float32)
+        cols["observation.depth"] = pa.FixedSizeListArray.from_arrays(
+            pa.array(episode["depth"].ravel()), episode["depth"].shape[1]
+        )
+    cols["action"] = pa.FixedSizeListArray.from_arrays(pa.array(episode["action"].ravel()), 2)
+    progress = np.asarray(episode["progress"], np.float32)
+    terminal = np.asarray(episode["terminal"], np.float32)
     cols["next.reward"] = progress + terminal
     cols["reward.progress"] = progress
     cols["reward.terminal"] = terminal
-    cols["next.done"] = np.array([r["done"] for r in rows])
-    cols["next.success"] = np.array([r["done"] and success for r in rows])
+    done = np.zeros(n, bool)
+    done[-1] = True
+    cols["next.done"] = done
+    cols["next.success"] = done & success
     cols["timestamp"] = (np.arange(n) / fps).astype(np.float32)
     cols["frame_index"] = np.arange(n, dtype=np.int64)
     cols["episode_index"] = np.full(n, episode_index, np.int64)
@@ -159,8 +202,7 @@ def _stats(table) -> dict[str, dict]:
     """LeRobot's per-episode statistics of every numeric column (per dimension for vectors)."""
     out = {}
     for name in table.column_names:
-        column = table.column(name).to_pylist()
-        values = np.asarray(column, dtype=np.float64)
+        values = np.asarray(table.column(name).to_pylist(), dtype=np.float64)
         if values.ndim == 1:
             values = values[:, None]
         out[name] = {
@@ -181,19 +223,38 @@ def collect(
     sensors: tuple[str, ...] = ("state",),
     limit: int | None = None,
     camera: dict[str, Any] | None = None,
+    keep: str = "success",
+    workers: int = 1,
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
 ) -> CollectSummary:
     """Roll ``policy_name`` out on the ``split`` episodes of a release into a LeRobot dataset at ``out``.
 
+    Args:
+        bench_path: the release (a folder, ``DIR@X.Y.Z`` or a release folder).
+        policy_name: the expert: a baseline name or ``module:Class``.
+        out: the dataset folder to create (must not exist or be empty).
+        split: which split's episodes.
+        sensors: what to record (see ``COLLECTABLE``).
+        limit: only the first N episodes of the split.
+        camera: camera sensors' options (``width``, ``height``, ``backend``).
+        keep: ``success`` writes only successful rollouts (what behaviour cloning wants), ``all`` every one.
+        workers: processes rolling episodes out in parallel (files are written in release order, so
+            the dataset does not depend on the worker count).
+        step_timeout_s: a policy call taking longer fails its episode.
+
     Raises:
-        SongError: an unknown sensor, an existing non-empty ``out``, or an unknown split.
+        SongError: an unknown sensor or ``keep``, an existing non-empty ``out``, or an unknown split.
     """
     import pyarrow.parquet as pq
+
+    from song.parallel import parallel_map
 
     chosen = parse_sensor_names(sensors)
     unknown = [s for s in chosen if s not in COLLECTABLE]
     if unknown:
         raise SongError(f"collect: sensor '{unknown[0]}' cannot be recorded; use any of {', '.join(COLLECTABLE)}")
+    if keep not in ("success", "all"):
+        raise SongError(f"collect: --keep {keep!r}: use success or all")
     out = Path(out)
     if out.exists() and any(out.iterdir()):
         raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
@@ -201,39 +262,41 @@ def collect(
     episodes = list(bench.episodes(split=split))[: limit if limit is not None else None]
     if not episodes:
         raise SongError(f"{bench_path}: no '{split}' episodes to collect")
-    policy = load_policy(policy_name)
-    names = tuple(dict.fromkeys([*policy_sensors(policy), *chosen]))
-    options = {"camera": dict(camera or {})}
-    suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, options)
+    load_policy(policy_name)  # an unknown policy fails here, before any work
     fps = float(bench.params.robot.control_hz)
+    jobs = [
+        CollectJob(str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s)
+        for e in episodes
+    ]
+    done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
     features: dict[str, dict] | None = None
-    lines, stats_lines, total, successes = [], [], 0, 0
-    for index, episode in enumerate(episodes):
-        episode = dataclasses.replace(episode, params=bench.params)
-        rows, frames, outcome = _rollout(episode, policy, suite, step_timeout_s)
-        if not rows:
+    lines, stats_lines, total, successes, index = [], [], 0, 0, 0
+    for episode in episodes:
+        result = done[episode.episode_id]
+        successes += result["outcome"] == "success"
+        if result["steps"] == 0 or (keep == "success" and result["outcome"] != "success"):
             continue
-        features = features or _features(rows[0]["obs"], chosen, fps)
+        features = features or _features(result, chosen, fps)
         chunk = index // CHUNK_SIZE
-        table = _table(rows, chosen, index, total, fps, outcome == "success")
+        table = _table(result, chosen, index, total, fps)
         path = out / DATA_PATH.format(episode_chunk=chunk, episode_index=index)
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, path, compression="zstd")
         if "rgb" in chosen:
-            from song.viz.draw import write_mp4
+            from song.render.video import write_mp4
 
             video = out / VIDEO_PATH.format(
                 episode_chunk=chunk, video_key="observation.images.rgb", episode_index=index
             )
             video.parent.mkdir(parents=True, exist_ok=True)
-            write_mp4(video, frames, fps)
+            write_mp4(video, result["rgb"], fps)
         lines.append(
-            {"episode_index": index, "tasks": [TASK], "length": len(rows), "song_episode_id": episode.episode_id,
-             "outcome": outcome, "difficulty": episode.difficulty}
+            {"episode_index": index, "tasks": [TASK], "length": result["steps"], "song_episode_id": episode.episode_id,
+             "outcome": result["outcome"], "difficulty": result["difficulty"]}
         )  # fmt: skip
         stats_lines.append({"episode_index": index, "stats": _stats(table)})
-        total += len(rows)
-        successes += outcome == "success"
+        total += result["steps"]
+        index += 1
     info = {
         "codebase_version": CODEBASE_VERSION,
         "robot_type": "song_differential_drive",
@@ -241,7 +304,7 @@ def collect(
         "total_frames": total,
         "total_tasks": 1,
         "total_videos": len(lines) if "rgb" in chosen else 0,
-        "total_chunks": (len(episodes) - 1) // CHUNK_SIZE + 1,
+        "total_chunks": max(1, (len(lines) - 1) // CHUNK_SIZE + 1),
         "chunks_size": CHUNK_SIZE,
         "fps": fps,
         "splits": {split: f"0:{len(lines)}"},
@@ -253,6 +316,9 @@ def collect(
             "fingerprint": bench.info.fingerprint,
             "policy": policy_name,
             "split": split,
+            "keep": keep,
+            "rollouts": len(episodes),
+            "successes": successes,
         },
     }
     meta = out / "meta"
@@ -261,4 +327,4 @@ def collect(
     write_text_atomic(meta / "episodes.jsonl", "".join(json.dumps(x, sort_keys=True) + "\n" for x in lines))
     write_text_atomic(meta / "episodes_stats.jsonl", "".join(json.dumps(x, sort_keys=True) + "\n" for x in stats_lines))
     write_text_atomic(meta / "tasks.jsonl", json.dumps({"task_index": 0, "task": TASK}) + "\n")
-    return CollectSummary(out, len(lines), total, successes)
+    return CollectSummary(out, len(lines), total, successes, len(episodes))

@@ -8,7 +8,8 @@ import numpy as np
 
 from song.datasets.run import RunFolder, read_crowd, read_intents, read_run_info
 from song.datasets.scenes import load_scene_package
-from song.viz.draw import colour, label, write_mp4, write_png
+from song.render.video import write_mp4
+from song.viz.draw import colour, label, write_png
 from song.viz.scene import draw_scene
 
 

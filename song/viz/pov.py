@@ -17,12 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from song.datasets.bench import open_benchmark, pedestrian_states
+from song.render.video import write_mp4
 from song.runtime.avatars import make_collider
 from song.runtime.evaluate import make_setup
 from song.runtime.loop import EpisodeRunner, run_episode
 from song.runtime.policies import load_policy
 from song.runtime.sensors import SensorSuite
-from song.viz.draw import Canvas, colour, label, map_canvas, write_mp4, write_png
+from song.viz.draw import Canvas, colour, label, map_canvas, write_png
 
 PANEL_HEIGHT = 360  # px of every panel in the video
 DEPTH_RANGE_M = 8.0

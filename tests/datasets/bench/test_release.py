@@ -248,49 +248,64 @@ def test_next_export_removes_a_killed_exports_temporary_folder(graded_run, tmp_p
 
 
 def test_collect_writes_a_lerobot_dataset_from_the_training_split(graded_run, tmp_path: Path) -> None:
+    """Round trip: the dataset's actions, replayed, give its recorded states and outcomes; frames match
+    steps; the same options give the same bytes with one or two workers; --keep success filters."""
+    import av
     from typer.testing import CliRunner
 
     from song.cli import app
+    from song.runtime.avatars import make_collider
+    from song.runtime.loop import EpisodeRunner
 
     run = _scene_1_for_training(graded_run())
     release = export_bench(run, tmp_path / "bench", "1.0.0").path
     outs = []
-    for name in ("dataset_a", "dataset_b"):
+    for name, workers in (("dataset_a", "1"), ("dataset_b", "2")):
         out = tmp_path / name
-        args = ["collect", "--bench", str(release), "--out", str(out), "--policy", "social", "--limit", "2"]
-        result = CliRunner().invoke(app, [*args, "--sensors", "state,depth,rgb", "--resolution", "64x48"])
+        args = ["collect", "--bench", str(release), "--out", str(out), "--policy", "social", "--limit", "3"]
+        args += ["--sensors", "state,depth,rgb", "--resolution", "64x48", "--keep", "all", "--workers", workers]
+        result = CliRunner().invoke(app, args)
         assert result.exit_code == 0, result.output
         outs.append(out)
+    assert _files(outs[0]) == _files(outs[1])  # deterministic, whatever the worker count
     out = outs[0]
     info = json.loads((out / "meta" / "info.json").read_text())
-    assert info["codebase_version"] == "v2.1" and info["total_episodes"] == 2 and info["splits"] == {"train": "0:2"}
+    assert info["codebase_version"] == "v2.1" and info["total_episodes"] == 3 and info["splits"] == {"train": "0:3"}
     features = info["features"]
     assert features["observation.state"]["shape"] == [10] and features["action"]["names"] == ["v", "omega"]
     assert features["observation.images.rgb"]["dtype"] == "video" and features["observation.depth"]["shape"] == [
         64 * 48
     ]
     episodes = [json.loads(line) for line in (out / "meta" / "episodes.jsonl").read_text().splitlines()]
-    assert [e["episode_index"] for e in episodes] == [0, 1] and all(
-        e["song_episode_id"].startswith("scene_1") for e in episodes
-    )
+    bench_release = bench.open(release)
     frames = 0
     for e in episodes:
         data = pq.read_table(out / info["data_path"].format(episode_chunk=0, episode_index=e["episode_index"]))
         assert data.num_rows == e["length"] and data.column("next.done").to_pylist()[-1] is True
-        assert data.column("index").to_pylist()[0] == frames  # global frame index runs across episodes
+        assert data.column("index").to_pylist()[0] == frames  # the global frame index runs across episodes
         rewards = np.array(data.column("next.reward").to_pylist())
         parts = np.array(data.column("reward.progress").to_pylist()) + np.array(
             data.column("reward.terminal").to_pylist()
         )
         np.testing.assert_allclose(rewards, parts, atol=1e-6)
-        assert (
-            out
-            / info["video_path"].format(
-                episode_chunk=0, video_key="observation.images.rgb", episode_index=e["episode_index"]
-            )
-        ).stat().st_size > 0
+        episode = bench_release.episode(e["song_episode_id"])
+        runner = EpisodeRunner(episode, make_collider(episode))
+        states = np.array(data.column("observation.state").to_pylist())
+        for state, action in zip(states, data.column("action").to_pylist(), strict=True):
+            np.testing.assert_allclose([runner.pose.x, runner.pose.y], state[:2], atol=1e-5)
+            runner.step(*action)
+        assert runner.outcome == e["outcome"]
+        video = out / info["video_path"].format(
+            episode_chunk=0, video_key="observation.images.rgb", episode_index=e["episode_index"]
+        )
+        with av.open(str(video)) as container:
+            assert sum(1 for _ in container.decode(video=0)) == e["length"]
         frames += data.num_rows
     assert info["total_frames"] == frames
-    assert _files(outs[0]) == _files(outs[1])  # deterministic, byte for byte
+    success = tmp_path / "dataset_success"
+    result = CliRunner().invoke(app, ["collect", "--bench", str(release), "--out", str(success), "--limit", "3"])
+    assert result.exit_code == 0, result.output
+    kept = [json.loads(line) for line in (success / "meta" / "episodes.jsonl").read_text().splitlines()]
+    assert [k["song_episode_id"] for k in kept] == [e["song_episode_id"] for e in episodes if e["outcome"] == "success"]
     again = CliRunner().invoke(app, ["collect", "--bench", str(release), "--out", str(out)])
     assert again.exit_code != 0 and "not empty" in again.output
