@@ -3,7 +3,9 @@
 A per-cell heap loop is what A* is; in pure Python it is ~100x slower than the C++ ``pyastar2d``.
 The loop is written for the compiler: the grid is padded with a blocked border (no bounds tests),
 neighbours are precomputed flat offsets, a closed flag replaces the stale-entry test, the heap is one
-contiguous array keyed by a single float, and the path is traced back inside the kernel.
+contiguous array keyed by a single float, neighbours whose key does not exceed the expanded cell's
+bypass the heap on a stack (with a consistent heuristic they are the next to expand anyway: their f
+equals the current minimum, and nothing cheaper is left), and the path is traced back inside the kernel.
 """
 
 from __future__ import annotations
@@ -21,51 +23,51 @@ TIE = 1e-9  # key = f + TIE * h: equal f pops the deeper node first (far fewer t
 
 
 @numba.njit(cache=True)
-def heap_push(keys: np.ndarray, ids: np.ndarray, size: int, key: float, v: int) -> int:
-    """Insert (key, v) into the binary min-heap (``keys``, ``ids``) of ``size`` entries; returns the new size.
+def heap_push(heap: np.ndarray, size: int, key: float, v: int) -> int:
+    """Insert (key, v) into the binary min-heap ``heap`` (cap, 2) of ``size`` entries; returns the new size.
 
-    Two flat arrays and one comparison per level: the heap is most of A*'s time, and a three-way
-    comparison over three arrays made it ~1.5× slower.
+    One contiguous array of (key, id as float) rows and one comparison per level: the heap is most
+    of A*'s time, and three arrays with a three-way comparison made it ~1.5× slower.
     """
     i = size
     while i > 0:
         up = (i - 1) >> 1
-        if keys[up] <= key:
+        if heap[up, 0] <= key:
             break
-        keys[i], ids[i] = keys[up], ids[up]
+        heap[i, 0], heap[i, 1] = heap[up, 0], heap[up, 1]
         i = up
-    keys[i], ids[i] = key, v
+    heap[i, 0], heap[i, 1] = key, v
     return size + 1
 
 
 @numba.njit(cache=True)
-def heap_pop(keys: np.ndarray, ids: np.ndarray, size: int):
+def heap_pop(heap: np.ndarray, size: int):
     """Remove the first entry; returns ``(key, id, new size)``."""
-    top_key, top_v = keys[0], ids[0]
+    top_key, top_v = heap[0, 0], heap[0, 1]
     size -= 1
-    key, v = keys[size], ids[size]
+    key, v = heap[size, 0], heap[size, 1]
     i = 0
     while True:
         child = 2 * i + 1
         if child >= size:
             break
-        if child + 1 < size and keys[child + 1] < keys[child]:
+        if child + 1 < size and heap[child + 1, 0] < heap[child, 0]:
             child += 1
-        if key <= keys[child]:
+        if key <= heap[child, 0]:
             break
-        keys[i], ids[i] = keys[child], ids[child]
+        heap[i, 0], heap[i, 1] = heap[child, 0], heap[child, 1]
         i = child
     if size > 0:
-        keys[i], ids[i] = key, v
-    return top_key, top_v, size
+        heap[i, 0], heap[i, 1] = key, v
+    return top_key, int(top_v), size
 
 
 @numba.njit(cache=True)
-def heap_reserve(keys: np.ndarray, ids: np.ndarray, size: int):
-    """The heap's arrays, doubled in capacity when they are full."""
-    if size < len(keys):
-        return keys, ids
-    return np.concatenate((keys, np.empty_like(keys))), np.concatenate((ids, np.empty_like(ids)))
+def heap_reserve(heap: np.ndarray, size: int) -> np.ndarray:
+    """The heap, doubled in capacity when it is full."""
+    if size < len(heap):
+        return heap
+    return np.concatenate((heap, np.empty_like(heap)))
 
 
 @numba.njit(cache=True, inline="always")
@@ -106,21 +108,21 @@ def search_kernel(free: np.ndarray, start: int, goal: int, limit: float, steps: 
     parent = np.full(n, -1, dtype=np.int64)
     closed = np.zeros(n, dtype=np.uint8)
     gr, gc = t // width, t % width
-    keys, ids = np.empty(1024), np.empty(1024, dtype=np.int64)
+    heap = np.empty((1024, 2))
     # cells whose key does not exceed the key just popped are the next to expand anyway: they go on a
-    # stack instead of through the heap (most cells of a grid search, as f rarely changes step to step)
+    # stack instead of through the heap (on a grid f rarely changes from a cell to its neighbour)
     stack = np.empty(1024, dtype=np.int64)
     top = 0
     g[s] = 0.0
     h0 = _heuristic(abs(s // width - gr), abs(s % width - gc), diagonal)
-    size = heap_push(keys, ids, 0, h0 * (1.0 + TIE), s)
+    size = heap_push(heap, 0, h0 * (1.0 + TIE), s)
     found = False
     while size > 0 or top > 0:
         if top > 0:
             top -= 1
             u = stack[top]
         else:
-            _, u, size = heap_pop(keys, ids, size)
+            _, u, size = heap_pop(heap, size)
         if u == t:
             found = True
             break
@@ -151,8 +153,8 @@ def search_kernel(free: np.ndarray, start: int, goal: int, limit: float, steps: 
                     stack[top] = v
                     top += 1
                 else:
-                    keys, ids = heap_reserve(keys, ids, size)
-                    size = heap_push(keys, ids, size, key, v)
+                    heap = heap_reserve(heap, size)
+                    size = heap_push(heap, size, key, v)
     if not found:
         return np.inf, np.zeros(0, dtype=np.int64)
     count, u = 0, t

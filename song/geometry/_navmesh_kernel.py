@@ -318,7 +318,7 @@ def shortest_path(sx, sy, gx, gy, reflex, verts, prev, nxt, va, vb, hgrid, hstar
     g = np.full(r + 1, np.inf)
     parent = np.full(r + 1, -1, dtype=np.int64)
     closed = np.zeros(r + 1, dtype=np.bool_)
-    keys, ids = np.empty(64), np.empty(64, dtype=np.int64)
+    heap = np.empty((64, 2))
     size = 0
     for i in range(r):
         v = reflex[i]
@@ -326,10 +326,10 @@ def shortest_path(sx, sy, gx, gy, reflex, verts, prev, nxt, va, vb, hgrid, hstar
             g[i] = math.hypot(verts[v, 0] - sx, verts[v, 1] - sy)
             parent[i] = start
             h = math.hypot(verts[v, 0] - gx, verts[v, 1] - gy)
-            keys, ids = heap_reserve(keys, ids, size)
-            size = heap_push(keys, ids, size, g[i] + h, i)
+            heap = heap_reserve(heap, size)
+            size = heap_push(heap, size, g[i] + h, i)
     while size > 0:
-        f, u, size = heap_pop(keys, ids, size)
+        f, u, size = heap_pop(heap, size)
         if u == goal:
             break
         if closed[u]:
@@ -347,16 +347,16 @@ def shortest_path(sx, sy, gx, gy, reflex, verts, prev, nxt, va, vb, hgrid, hstar
                     if closed[w] and g[w] + vlen[m] < g[u]:
                         g[u], parent[u] = g[w] + vlen[m], w
                 if g[u] < np.inf:
-                    keys, ids = heap_reserve(keys, ids, size)
-                    size = heap_push(keys, ids, size, g[u] + hu, u)
+                    heap = heap_reserve(heap, size)
+                    size = heap_push(heap, size, g[u] + hu, u)
                 continue
         closed[u] = True
         if g[u] + hu < g[goal] and _tangent(reflex[u], gx, gy, verts, prev, nxt):
             tick += 1
             if _ray_clear(vx, vy, gx, gy, va, vb, verts, hgrid, hstart, hitems, stamp, tick):
                 g[goal], parent[goal] = g[u] + hu, u
-                keys, ids = heap_reserve(keys, ids, size)
-                size = heap_push(keys, ids, size, g[goal], goal)
+                heap = heap_reserve(heap, size)
+                size = heap_push(heap, size, g[goal], goal)
         for m in range(vptr[u], vptr[u + 1]):
             w = vidx[m]
             cand = g[u] + vlen[m]
@@ -364,8 +364,8 @@ def shortest_path(sx, sy, gx, gy, reflex, verts, prev, nxt, va, vb, hgrid, hstar
                 g[w] = cand
                 parent[w] = u
                 h = math.hypot(verts[reflex[w], 0] - gx, verts[reflex[w], 1] - gy)
-                keys, ids = heap_reserve(keys, ids, size)
-                size = heap_push(keys, ids, size, cand + h, w)
+                heap = heap_reserve(heap, size)
+                size = heap_push(heap, size, cand + h, w)
     if g[goal] == np.inf:
         return np.full(1, -1, dtype=np.int64)
     chain = np.empty(r + 1, dtype=np.int64)
@@ -384,14 +384,14 @@ def distances_from(sx, sy, goals, reflex, verts, prev, nxt, va, vb, hgrid, hstar
     r = len(reflex)
     g, tick = _visible_from(sx, sy, reflex, verts, prev, nxt, va, vb, hgrid, hstart, hitems, stamp, 0)
     done = np.zeros(r, dtype=np.bool_)
-    keys, ids = np.empty(64), np.empty(64, dtype=np.int64)
+    heap = np.empty((64, 2))
     size = 0
     for i in range(r):
         if g[i] < np.inf:
-            keys, ids = heap_reserve(keys, ids, size)
-            size = heap_push(keys, ids, size, g[i], i)
+            heap = heap_reserve(heap, size)
+            size = heap_push(heap, size, g[i], i)
     while size > 0:
-        f, u, size = heap_pop(keys, ids, size)
+        f, u, size = heap_pop(heap, size)
         if done[u]:
             continue
         done[u] = True
@@ -400,8 +400,8 @@ def distances_from(sx, sy, goals, reflex, verts, prev, nxt, va, vb, hgrid, hstar
             cand = g[u] + vlen[m]
             if cand < g[w]:
                 g[w] = cand
-                keys, ids = heap_reserve(keys, ids, size)
-                size = heap_push(keys, ids, size, cand, w)
+                heap = heap_reserve(heap, size)
+                size = heap_push(heap, size, cand, w)
     out = np.full(len(goals), np.inf)
     for k in range(len(goals)):
         gx, gy = goals[k, 0], goals[k, 1]
