@@ -197,3 +197,21 @@ def test_graded_splits_are_scene_disjoint(sample_run: Path, tmp_path: Path) -> N
         subset = [r for r in rows if r["split"] == name]
         assert sum(r["difficulty"] == "hard" for r in subset) == round(0.2 * len(subset))
     assert result.summary["splits"]["test"]["episodes"] == 12
+
+
+def test_grade_takes_grading_overrides_validated_before_any_work(sample_run: Path, tmp_path: Path) -> None:
+    import pyarrow.parquet as pq
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    run = tmp_path / "run"
+    shutil.copytree(sample_run, run)
+    runner = CliRunner()
+    bad = runner.invoke(app, ["grade", "--run", str(run), "--episodes", "6", "--set", "grading.robot_radius_m=-1"])
+    assert bad.exit_code != 0 and "grading.robot_radius_m" in bad.output and not (run / "manifest").exists()
+    other = runner.invoke(app, ["grade", "--run", str(run), "--set", "crowd.agent_radius_m=0.3"])
+    assert other.exit_code != 0 and "grading.* values only" in other.output
+    ok = runner.invoke(app, ["grade", "--run", str(run), "--episodes", "6", "--set", "grading.robot_radius_m=0.3"])
+    assert ok.exit_code == 0, ok.output
+    assert pq.read_table(run / "manifest" / "episodes.parquet").num_rows == 6
