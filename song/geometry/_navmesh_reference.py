@@ -16,7 +16,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from song.geometry._navmesh_kernel import SHORTEN_M, TOUCH_EPS
-from song.geometry.navmesh import Navmesh, _component_rings, _cross, _ring_links, segments_blocked
+from song.geometry.navmesh import Navmesh, _component_rings, _cross, _ring_links
 
 STEPS_16 = [(1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)]
 
@@ -31,6 +31,29 @@ def points_on_mesh(mesh: Navmesh, n: int, rng: np.random.Generator) -> np.ndarra
     flip = u + v > 1
     u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
     return t[k, 0] + u[:, None] * e1[k] + v[:, None] * e2[k]
+
+
+def segments_blocked(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether query segments p→q hit wall segments a→b (crossing or touching, not collinear).
+
+    Args:
+        p: (..., 2) float64 query segment starts, m.
+        q: (..., 2) float64 query segment ends, m.
+        a: (..., 2) float64 wall segment starts, m (broadcast against p, q).
+        b: (..., 2) float64 wall segment ends, m.
+
+    Returns:
+        (...) bool. Collinear overlaps do not count (a path may run along a wall).
+    """
+    dx, dy = q[..., 0] - p[..., 0], q[..., 1] - p[..., 1]
+    ex, ey = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
+    o1 = _cross(dx, dy, a[..., 0] - p[..., 0], a[..., 1] - p[..., 1])
+    o2 = _cross(dx, dy, b[..., 0] - p[..., 0], b[..., 1] - p[..., 1])
+    o3 = _cross(ex, ey, p[..., 0] - a[..., 0], p[..., 1] - a[..., 1])
+    o4 = _cross(ex, ey, q[..., 0] - a[..., 0], q[..., 1] - a[..., 1])
+    o1, o2, o3, o4 = (np.where(np.abs(o) < TOUCH_EPS, 0.0, o) for o in (o1, o2, o3, o4))
+    collinear = (o1 == 0.0) & (o2 == 0.0)
+    return (o1 * o2 <= 0.0) & (o3 * o4 <= 0.0) & ~collinear
 
 
 def segment_clear_reference(mesh: Navmesh, p: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from song.geometry import _navmesh_kernel as _k
-from song.geometry._navmesh_kernel import NUDGE_M, TOUCH_EPS
+from song.geometry._navmesh_kernel import TOUCH_EPS
 
 NAVMESH_FORMAT = 1
 BUCKET_M = 0.5  # cell size of the spatial hash used for wall and triangle look-ups
@@ -109,42 +109,6 @@ def _cross(ax, ay, bx, by):
 def polyline_length(points: np.ndarray) -> float:
     """Length (m) of a (K, 2) polyline."""
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum()) if len(points) > 1 else 0.0
-
-
-def segments_blocked(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Whether query segments p→q hit wall segments a→b (crossing or touching, not collinear).
-
-    Args:
-        p: (..., 2) float64 query segment starts, m.
-        q: (..., 2) float64 query segment ends, m.
-        a: (..., 2) float64 wall segment starts, m (broadcast against p, q).
-        b: (..., 2) float64 wall segment ends, m.
-
-    Returns:
-        (...) bool. Collinear overlaps do not count (a path may run along a wall).
-    """
-    dx, dy = q[..., 0] - p[..., 0], q[..., 1] - p[..., 1]
-    ex, ey = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    o1 = _cross(dx, dy, a[..., 0] - p[..., 0], a[..., 1] - p[..., 1])
-    o2 = _cross(dx, dy, b[..., 0] - p[..., 0], b[..., 1] - p[..., 1])
-    o3 = _cross(ex, ey, p[..., 0] - a[..., 0], p[..., 1] - a[..., 1])
-    o4 = _cross(ex, ey, q[..., 0] - a[..., 0], q[..., 1] - a[..., 1])
-    o1, o2, o3, o4 = (np.where(np.abs(o) < TOUCH_EPS, 0.0, o) for o in (o1, o2, o3, o4))
-    collinear = (o1 == 0.0) & (o2 == 0.0)
-    return (o1 * o2 <= 0.0) & (o3 * o4 <= 0.0) & ~collinear
-
-
-def nearest_on_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closest points of segments to points, pairwise over (N,) × (S,).
-
-    Returns:
-        ``(closest (N, S, 2), dist (N, S))`` in metres.
-    """
-    d = b - a
-    len2 = np.maximum((d**2).sum(-1), 1e-300)
-    t = np.clip(((points[:, None, :] - a[None]) * d[None]).sum(-1) / len2[None], 0.0, 1.0)
-    closest = a[None] + t[..., None] * d[None]
-    return closest, np.linalg.norm(points[:, None, :] - closest, axis=-1)
 
 
 def funnel(portals_left: np.ndarray, portals_right: np.ndarray, start: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -284,6 +248,11 @@ class Navmesh:
             self._cache["args"] = (*(k[n] for n in names), comp, *(k[n] for n in tail))
         return self._cache["kernel"]
 
+    def _kernel_args(self) -> tuple:
+        """The kernel arrays as the one tuple :func:`song.geometry._navmesh_kernel.find_path` takes."""
+        self._kernel()
+        return self._cache["args"]
+
     @property
     def area(self) -> float:
         """Mesh area, m²."""
@@ -317,12 +286,6 @@ class Navmesh:
         k = self._kernel()
         points = np.ascontiguousarray(np.atleast_2d(points), dtype=np.float64)
         return _k.nearest_walls(points, k["va"], k["vb"], k["verts"])
-
-    def nudge_inside(self, points: np.ndarray, segment: np.ndarray) -> np.ndarray:
-        """Move boundary points NUDGE_M toward the centroid of their boundary edge's triangle."""
-        centroid = self.vertices[self.triangles[self.seg_triangle[segment]]].mean(axis=1)
-        d = centroid - points
-        return points + d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300) * NUDGE_M
 
     def snap(self, points: np.ndarray, max_dist: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Nearest point of the mesh (the point itself when inside).
@@ -433,21 +396,6 @@ class Navmesh:
         empty = np.zeros((0, 2))
         return funnel(np.array(left) if left else empty, np.array(right) if right else empty, start, goal)
 
-    def shortest_path(self, start: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
-        """The true shortest path (K, 2) between two points of one mesh part, or None.
-
-        A compiled A* over the reduced visibility graph (shortest paths bend only at reflex vertices).
-        """
-        k = self._kernel()
-        start, goal = np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64)
-        bends = _k.shortest_path(
-            start[0], start[1], goal[0], goal[1], k["reflex"], k["verts"], k["prev"], k["next"], k["va"], k["vb"],
-            k["grid"], k["sstart"], k["sitems"], k["vptr"], k["vidx"], k["vlen"],
-        )  # fmt: skip
-        if len(bends) == 1 and bends[0] < 0:
-            return None
-        return np.vstack([start, self.vertices[self.reflex[bends]], goal])
-
     def find_path(
         self, start: np.ndarray, goal: np.ndarray, max_snap: float = 0.5, allow_partial: bool = True
     ) -> PathResult:
@@ -460,8 +408,6 @@ class Navmesh:
             allow_partial: when the goal is in another mesh part, return a path to the point of the
                 start's part nearest to the goal (status ``partial``) instead of ``unreachable``.
         """
-        if "args" not in self._cache:
-            self._kernel()
         code, points, length = _k.find_path(
             float(start[0]),
             float(start[1]),
@@ -469,7 +415,7 @@ class Navmesh:
             float(goal[1]),
             float(max_snap),
             bool(allow_partial),
-            self._cache["args"],
+            self._kernel_args(),
         )
         if code in (_k.OK, _k.PARTIAL):
             reason = "" if code == _k.OK else "goal is on another part of the mesh"

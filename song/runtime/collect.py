@@ -37,9 +37,9 @@ import numpy as np
 from song.datasets.bench import open_benchmark
 from song.errors import SongError
 from song.runtime.avatars import make_collider
-from song.runtime.env import SUCCESS_REWARD
-from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S, PolicyFailure, as_command, call_policy, frozen_copy
-from song.runtime.loop import EpisodeRunner
+from song.runtime.env import reward_terms
+from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
+from song.runtime.loop import EpisodeRunner, run_episode
 from song.runtime.policies import load_policy, policy_sensors
 from song.runtime.sensors import SensorSuite, parse_sensor_names
 from song.util import write_json_atomic, write_text_atomic
@@ -114,43 +114,54 @@ class CollectJob:
     step_timeout_s: float
 
 
+class _Recorder:
+    """Wraps a policy: remembers the observation it was last shown (the one before the step)."""
+
+    def __init__(self, policy) -> None:
+        self.policy, self.observation = policy, None
+
+    def reset(self, episode) -> None:
+        self.policy.reset(episode)
+
+    def act(self, observation):
+        self.observation = observation
+        return self.policy.act(observation)
+
+
 def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:  # noqa: B006 - per-process cache
-    """Roll one episode out: per step the observation before acting, the executed action, reward terms."""
+    """Roll one episode out with :func:`run_episode`, recording every step.
+
+    Per step: the observation before acting, the executed action and the reward terms (the Gymnasium
+    env's, :func:`song.runtime.env.reward_terms`).
+    """
     if job.bench not in cache:
         cache[job.bench] = open_benchmark(job.bench)
     bench = cache[job.bench]
     episode = dataclasses.replace(bench.episode(job.episode_id), params=bench.params)
-    policy = load_policy(job.policy)
-    names = tuple(dict.fromkeys([*policy_sensors(policy), *job.sensors]))
+    recorder = _Recorder(load_policy(job.policy))
+    names = tuple(dict.fromkeys([*policy_sensors(recorder.policy), *job.sensors]))
     suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, {"camera": dict(job.camera)})
-    runner = EpisodeRunner(episode, make_collider(episode), suite)
-    steps: dict[str, list] = {
-        k: [] for k in ("state", "scan", "pedestrians", "depth", "rgb", "action", "progress", "terminal")
-    }
-    try:
-        call_policy(policy.reset, frozen_copy(episode), what="reset()", timeout_s=job.step_timeout_s)
-        while runner.outcome is None:
-            obs = runner.observation()
-            action = call_policy(policy.act, obs, what="act()", timeout_s=job.step_timeout_s)
-            before = float(np.linalg.norm(runner.pose.xy - episode.goal_xy))
-            outcome = runner.step(*as_command(action))
-            after = float(np.linalg.norm(runner.pose.xy - episode.goal_xy))
-            failed = outcome in ("obstacle", "human")
-            steps["terminal"].append(SUCCESS_REWARD if outcome == "success" else -SUCCESS_REWARD if failed else 0.0)
-            steps["progress"].append(before - after)
-            steps["action"].append(np.asarray(runner.command, np.float32))
-            if "state" in job.sensors:
-                steps["state"].append(_flat_state(obs["state"]))
-            for name in ("scan", "pedestrians"):
-                if name in job.sensors:
-                    steps[name].append(np.asarray(obs[name], np.float32).ravel())
-            if "depth" in job.sensors:
-                steps["depth"].append(np.asarray(obs["depth"], np.float16))
-            if "rgb" in job.sensors:
-                steps["rgb"].append(np.asarray(obs["rgb"], np.uint8))
-    except PolicyFailure as exc:
-        runner.fail(str(exc))
-    out: dict[str, Any] = {"episode_id": job.episode_id, "difficulty": episode.difficulty, "outcome": runner.outcome}
+    steps: dict[str, list] = {k: [] for k in (*COLLECTABLE, "action", "progress", "terminal")}
+
+    def record(runner: EpisodeRunner) -> None:
+        obs = recorder.observation
+        before, after = (float(np.linalg.norm(p.xy - episode.goal_xy)) for p in runner.poses[-2:])
+        progress, terminal = reward_terms(before, after, runner.outcome)
+        steps["progress"].append(progress)
+        steps["terminal"].append(terminal)
+        steps["action"].append(np.asarray(runner.command, np.float32))
+        if "state" in job.sensors:
+            steps["state"].append(_flat_state(obs["state"]))
+        for name in ("scan", "pedestrians"):
+            if name in job.sensors:
+                steps[name].append(np.asarray(obs[name], np.float32).ravel())
+        if "depth" in job.sensors:
+            steps["depth"].append(np.asarray(obs["depth"], np.float16))
+        if "rgb" in job.sensors:
+            steps["rgb"].append(np.asarray(obs["rgb"], np.uint8))
+
+    result = run_episode(episode, recorder, make_collider(episode), suite, record, job.step_timeout_s)
+    out: dict[str, Any] = {"episode_id": job.episode_id, "difficulty": episode.difficulty, "outcome": result.outcome}
     for name, values in steps.items():
         if values:
             out[name] = np.stack(values)

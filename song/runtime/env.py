@@ -104,11 +104,17 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         previous = np.linalg.norm(self.runner.pose.xy - self.runner.episode.goal_xy)
         outcome = self.runner.step(float(action[0]), float(action[1]))
         distance = np.linalg.norm(self.runner.pose.xy - self.runner.episode.goal_xy)
-        reward = float(previous - distance) + (SUCCESS_REWARD if outcome == "success" else 0.0)
-        reward -= SUCCESS_REWARD if outcome in ("obstacle", "human") else 0.0
+        progress, terminal = reward_terms(float(previous), float(distance), outcome)
+        reward = progress + terminal
         terminated = outcome in ("success", "obstacle", "human")
         truncated = outcome == "timeout"
         return self.runner.observation(), reward, terminated, truncated, self._info()
+
+
+def reward_terms(previous_m: float, distance_m: float, outcome: str | None) -> tuple[float, float]:
+    """A step's reward as ``(progress toward the goal, m; ±SUCCESS_REWARD at a success / collision end)``."""
+    terminal = SUCCESS_REWARD if outcome == "success" else -SUCCESS_REWARD if outcome in ("obstacle", "human") else 0.0
+    return previous_m - distance_m, terminal
 
 
 def register() -> None:

@@ -286,8 +286,7 @@ def _body_parts(p: AvatarParams, rest: np.ndarray) -> list[_Part]:
             )
         )
     if "bag" in p.accessories:
-        side = 1.0 if p.extra.get("bag_left", True) else -1.0
-        centre = pelvis + np.array([-0.01, side * (waist_half * g + 0.05 * s), 0.0])
+        centre = pelvis + np.array([-0.01, waist_half * g + 0.05 * s, 0.0])  # on the left hip
         parts.append(blob("bag", centre, np.array([0.1, 0.045, 0.12]) * s, "bag"))
     if "glasses" in p.accessories:
         for side in (1.0, -1.0):
