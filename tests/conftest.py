@@ -51,8 +51,8 @@ def synthetic_ply(path: Path, n: int = 5000, seed: int = 0) -> Path:
     return path
 
 
-def build_two_room_scene(root: Path, scene_id: str = "tiny", resolution: float = 0.05) -> Path:
-    """An 8 m × 4 m scene: two 4 m rooms, a 1 m door in the dividing wall, a few objects.
+def build_two_room_scene(root: Path, scene_id: str = "tiny", resolution: float = 0.05, door: float = 1.0) -> Path:
+    """An 8 m × 4 m scene: two 4 m rooms, a ``door`` m wide door (centred at y = 2 m) in the dividing wall, a few objects.
 
     Walls are 0.1 m thick around the border and between the rooms (x = 4 m).
     """
@@ -64,7 +64,7 @@ def build_two_room_scene(root: Path, scene_id: str = "tiny", resolution: float =
     cells[:, :wall] = cells[:, -wall:] = 0
     mid = cols // 2
     cells[:, mid - wall // 2 - 1 : mid + wall // 2 + 1] = 0
-    door_lo, door_hi = round(1.5 / resolution), round(2.5 / resolution)
+    door_lo, door_hi = round((2.0 - door / 2) / resolution), round((2.0 + door / 2) / resolution)
     cells[rows - door_hi : rows - door_lo, mid - wall // 2 - 1 : mid + wall // 2 + 1] = 255
     # a desk in room A and a sofa in room B, rasterised as occupied
     desk = [(1.0, 0.5), (2.0, 0.5), (2.0, 1.0), (1.0, 1.0)]
@@ -107,10 +107,10 @@ def _private_song_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
 
 @pytest.fixture
 def make_scene(tmp_path: Path) -> Callable[..., Path]:
-    """Factory: ``make_scene(scene_id="tiny", resolution=0.05) -> Path`` of a valid package."""
+    """Factory: ``make_scene(scene_id="tiny", resolution=0.05, door=1.0) -> Path`` of a valid package."""
 
-    def factory(scene_id: str = "tiny", resolution: float = 0.05, root: Path | None = None) -> Path:
-        return build_two_room_scene(root or tmp_path / "scenes", scene_id, resolution)
+    def factory(scene_id: str = "tiny", resolution: float = 0.05, root: Path | None = None, door: float = 1.0) -> Path:
+        return build_two_room_scene(root or tmp_path / "scenes", scene_id, resolution, door)
 
     return factory
 

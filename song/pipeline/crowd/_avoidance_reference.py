@@ -8,7 +8,12 @@ from song.pipeline.crowd.avoidance import ANTICIPATION_GAIN, ANTICIPATION_MARGIN
 
 
 def anticipate_reference(
-    positions: np.ndarray, velocities: np.ndarray, preferred: np.ndarray, comfort_distance: float, horizon: float
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    preferred: np.ndarray,
+    comfort_distance: float,
+    horizon: float,
+    reach: float,
 ) -> np.ndarray:
     """Reference twin of :func:`song.pipeline.crowd.avoidance.anticipate` (vectorised numpy, same arithmetic)."""
     speed = np.hypot(preferred[:, 0], preferred[:, 1])
@@ -22,6 +27,7 @@ def anticipate_reference(
     miss = rel_p + rel_v * t[..., None]
     d = np.hypot(miss[..., 0], miss[..., 1])
     d[np.arange(len(walking)), walking] = np.inf
+    d[np.hypot(rel_p[..., 0], rel_p[..., 1]) >= reach] = np.inf  # beyond reach: not considered
     heading = preferred[walking] / speed[walking, None]
     side = np.column_stack([-heading[:, 1], heading[:, 0]])
     lateral = (miss * side[:, None, :]).sum(-1)  # which side the other passes on

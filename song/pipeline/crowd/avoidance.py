@@ -119,10 +119,13 @@ class WallDistance:
 
 
 @numba.njit(cache=True, nogil=True)
-def _anticipate_kernel(positions, velocities, preferred, comfort_distance, horizon, gain, margin):  # pragma: no cover
+def _anticipate_kernel(
+    positions, velocities, preferred, comfort_distance, horizon, reach, gain, margin
+):  # pragma: no cover
     out = preferred.copy()
     n = len(positions)
     aim = comfort_distance + margin
+    reach_sq = reach * reach
     for i in range(n):
         speed = np.hypot(preferred[i, 0], preferred[i, 1])
         if speed <= 1e-6:
@@ -134,6 +137,8 @@ def _anticipate_kernel(positions, velocities, preferred, comfort_distance, horiz
             if j == i:
                 continue
             px, py = positions[j, 0] - positions[i, 0], positions[j, 1] - positions[i, 1]
+            if px * px + py * py >= reach_sq:
+                continue
             vx, vy = velocities[j, 0] - preferred[i, 0], velocities[j, 1] - preferred[i, 1]
             vv = vx * vx + vy * vy
             t = min(max(-(px * vx + py * vy) / (vv if vv > 1e-9 else 1.0), 0.0), horizon)
@@ -148,14 +153,20 @@ def _anticipate_kernel(positions, velocities, preferred, comfort_distance, horiz
 
 
 def anticipate(
-    positions: np.ndarray, velocities: np.ndarray, preferred: np.ndarray, comfort_distance: float, horizon: float
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    preferred: np.ndarray,
+    comfort_distance: float,
+    horizon: float,
+    reach: float,
 ) -> np.ndarray:
     """Preferred velocities bent aside, early, from people who would pass closer than the comfort distance.
 
     For each walker and each other pedestrian the closest approach is predicted with constant
     velocities (the walker at its preferred velocity) within ``horizon``; when it falls short of
     ``comfort_distance`` the walker's preferred direction gains a sideways component away from where
-    the other will be, stronger the shorter the miss and the sooner it comes. The speed is unchanged.
+    the other will be, stronger the shorter the miss and the sooner it comes; people ``reach`` (the
+    model's neighbour distance) or farther away are left out. The speed is unchanged.
     The crowd's hard constraints (ORCA at the body radius, walls, overlap resolution) still decide the
     velocity, so in a passage too narrow for comfort people simply pass at their body distance.
 
@@ -171,6 +182,7 @@ def anticipate(
         np.ascontiguousarray(preferred, np.float64),
         float(comfort_distance),
         float(horizon),
+        float(reach),
         ANTICIPATION_GAIN,
         ANTICIPATION_MARGIN_M,
     )
@@ -214,11 +226,16 @@ class OrcaAvoidance:
         max_speeds: np.ndarray,
     ) -> np.ndarray:
         """ORCA's new velocities with personal-space radii (see :func:`song.pipeline.crowd.orca.orca_step`)."""
-        wall = self.wall_distance.at(positions)
+        # the room a walker has now and where its preferred velocity takes it within the obstacle horizon:
+        # the comfort shrinks before a narrowing, so that ORCA's wall never holds a walker at its entrance
+        ahead = positions + preferred * self.params.time_horizon_obst
+        wall = np.minimum(self.wall_distance.at(positions), self.wall_distance.at(ahead))
         # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
         pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
         wall_radii = np.maximum(np.minimum(wall - ROOM_MARGIN_M, radii + self.wall_comfort * pace), radii)
-        bent = anticipate(positions, velocities, preferred, self.comfort, self.params.time_horizon)
+        bent = anticipate(
+            positions, velocities, preferred, self.comfort, self.params.time_horizon, self.params.neighbor_dist
+        )
         return orca_step(positions, velocities, bent, radii, max_speeds, self.walls, self.params, wall_radii)
 
 

@@ -114,6 +114,9 @@ def test_compiled_anticipation_equals_its_reference_twin() -> None:
         vel = rng.normal(0, 0.8, (n, 2))
         pref = rng.normal(0, 1.0, (n, 2))
         pref[rng.random(n) < 0.3] = 0.0  # some stand
-        np.testing.assert_allclose(
-            anticipate(pos, vel, pref, 1.0, 4.0), anticipate_reference(pos, vel, pref, 1.0, 4.0), atol=1e-12
-        )
+        for reach in (3.0, 50.0):  # some pairs beyond reach, then none
+            np.testing.assert_allclose(
+                anticipate(pos, vel, pref, 1.0, 4.0, reach),
+                anticipate_reference(pos, vel, pref, 1.0, 4.0, reach),
+                atol=1e-12,
+            )

@@ -1,0 +1,128 @@
+"""Crowd planning cost against density in a generated lobby, one JSON object.
+
+.venv/bin/python benchmarks/crowd_density.py [--counts 8 16 32 64] [--reference]
+
+The scene: the procedural lobby ``lobby_0002`` (seed 7, the one ``benchmarks/render.py`` uses; its
+navmesh at r = 0.25 m is reported). For each count N we draw N synthetic single-leg intents on the
+mesh (seeded): starts and goals at least 0.8 m from each other's, paths 5–25 m long, speeds uniform
+0.5–1.0 m/s (the paper's profile), departures uniform over the first 20 s. The crowd planner
+(:func:`song.pipeline.crowd.simulate.plan_crowd`) runs on them with the default crowd settings; we
+report wall seconds, pedestrians removed, arrivals and the cost ratio of the largest count to the
+smallest, and check that the kept pedestrians' tracks equal a fresh run of them alone (the removal
+contract). ``--reference`` also times the plain removal that re-runs the crowd from t = 0 after each
+removal (``rollback=False``) on the same intents, interleaved.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import emit  # noqa: E402
+
+from song.config import SongConfig  # noqa: E402
+from song.datasets.run.intents import Intent, Provenance  # noqa: E402
+from song.datasets.scenes import load_scene_package  # noqa: E402
+from song.datasets.scenes.generate import generate_scene  # noqa: E402
+from song.geometry.navmesh import Navmesh  # noqa: E402
+from song.pipeline.crowd.avoidance import make_avoidance  # noqa: E402
+from song.pipeline.crowd.navmesh import scene_navmesh  # noqa: E402
+from song.pipeline.crowd.simulate import plan_crowd  # noqa: E402
+from song.util import derive_rng  # noqa: E402
+
+SPACING_M, MIN_PATH_M, MAX_PATH_M, DEPART_S = 0.8, 5.0, 25.0, 20.0
+
+
+def synthetic_intents(mesh: Navmesh, count: int, seed: int) -> list[Intent]:
+    """``count`` single-leg intents with spaced starts and goals on ``mesh`` (see the module doc)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    starts: list[np.ndarray] = []
+    goals: list[np.ndarray] = []
+    intents: list[Intent] = []
+    for _ in range(200 * count):
+        if len(intents) == count:
+            break
+        a, b = rng.uniform(lo, hi, (2, 2))
+        if not mesh.contains(np.stack([a, b])).all():
+            continue
+        if any(np.hypot(*(a - s)) < SPACING_M for s in starts) or any(np.hypot(*(b - g)) < SPACING_M for g in goals):
+            continue
+        res = mesh.find_path(a, b, max_snap=0.0, allow_partial=False)
+        length = float(np.sum(np.hypot(*np.diff(res.points, axis=0).T))) if res.status == "ok" else 0.0
+        if not MIN_PATH_M <= length <= MAX_PATH_M:
+            continue
+        starts.append(a)
+        goals.append(b)
+        intents.append(
+            Intent(
+                id=len(intents),
+                activity="walk",
+                start_object="start",
+                goal_object="goal",
+                start_xy=(float(a[0]), float(a[1])),
+                goal_xy=(float(b[0]), float(b[1])),
+                speed=float(rng.uniform(0.5, 1.0)),
+                depart_time=float(rng.uniform(0.0, DEPART_S)),
+                provenance=Provenance(provider="offline", model="benchmark"),
+            )
+        )
+    if len(intents) < count:
+        raise SystemExit(f"only {len(intents)} of {count} spaced intents fit the lobby")
+    return intents
+
+
+def timed(intents, mesh, config, rollback: bool):
+    cfg = config.crowd
+    start = time.perf_counter()
+    plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "lobby", "crowd"), rollback=rollback)
+    seconds = time.perf_counter() - start
+    removed = sum(v["status"] == "removed" for v in plan.status.values())
+    arrived = sum(v["status"] == "arrived" for v in plan.status.values())
+    return seconds, removed, arrived, plan
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[8, 16, 32, 64])
+    parser.add_argument("--reference", action="store_true", help="also time the re-run-from-zero removal")
+    args = parser.parse_args()
+    config = SongConfig()
+    with tempfile.TemporaryDirectory() as tmp:
+        package = load_scene_package(generate_scene("lobby_0002", "lobby", 7, Path(tmp), splat=False))
+    mesh = scene_navmesh(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
+    timed(synthetic_intents(mesh, 4, 99), mesh, config, True)  # first-use compilation outside the timings
+    rows = []
+    for count in args.counts:
+        intents = synthetic_intents(mesh, count, count)
+        seconds, removed, arrived, plan = timed(intents, mesh, config, True)
+        row = {"pedestrians": count, "seconds": round(seconds, 2), "removed": removed, "arrived": arrived}
+        if args.reference:
+            ref_s, _, _, ref = timed(intents, mesh, config, False)
+            row["reference_seconds"] = round(ref_s, 2)
+            row["speedup"] = round(ref_s / seconds, 2)
+            row["reference_removed"] = sum(v["status"] == "removed" for v in ref.status.values())
+        kept = set(plan.ped_ids.tolist())
+        _, _, _, fresh = timed([i for i in intents if i.id in kept], mesh, config, False)
+        same = fresh.xy.shape == plan.xy.shape and np.array_equal(fresh.ped_ids, plan.ped_ids)
+        row["equals_fresh_run_of_kept"] = bool(same and np.array_equal(fresh.xy, plan.xy))
+        rows.append(row)
+    emit(
+        {
+            "scene": "lobby_0002 (seed 7)",
+            "navmesh_m2": round(mesh.area, 1),
+            "runs": rows,
+            "cost_ratio_largest_to_smallest": round(rows[-1]["seconds"] / rows[0]["seconds"], 1),
+            "target_ratio_64_to_8": 10.0,
+        }
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,25 @@
+"""Reference twins of the compiled crowd pair loops (used by tests only)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def near_walkers_reference(pos: np.ndarray, moving: np.ndarray, reach: float) -> np.ndarray:
+    """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.near_walkers` (all-pairs numpy)."""
+    walkers = np.flatnonzero(moving)
+    d = np.hypot(*(pos[:, None] - pos[None, walkers]).transpose(2, 0, 1))
+    d[walkers, np.arange(len(walkers))] = np.inf
+    return (d < reach).any(axis=1)
+
+
+def overlap_push_reference(target: np.ndarray, moving: np.ndarray, min_dist: float) -> tuple[np.ndarray, bool]:
+    """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.overlap_push` (all-pairs numpy)."""
+    diff = target[:, None, :] - target[None, :, :]
+    dist = np.hypot(diff[..., 0], diff[..., 1])
+    np.fill_diagonal(dist, np.inf)
+    overlap = np.clip(min_dist - dist, 0.0, None)
+    share = np.where(moving[None, :], 0.5, 1.0)
+    push = (diff / np.maximum(dist, 1e-9)[..., None] * (share * overlap)[..., None]).sum(axis=1)
+    push[~moving] = 0.0
+    return push, bool(overlap.any())
