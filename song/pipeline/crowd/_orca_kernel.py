@@ -3,7 +3,8 @@
 The per-agent algorithm of ``_orca_reference.py`` (RVO2's ``Agent.cpp``/``KdTree.cpp`` statement by
 statement) compiled to machine code -- numpy's per-call overhead dominates at the crowd sizes of indoor
 scenes, so the algorithm is written as scalar loops: agent neighbours by sorted insertion capped at
-``max_neighbors``, obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack,
+``max_neighbors`` (from a uniform grid of cells ``neighbor_dist`` wide from 64 agents on, where RVO2
+walks a k-d tree; ties between equally distant agents go to the lower index either way), obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack,
 same visiting order), obstacle lines with legs, cut-off and foreign legs, agent lines,
 ``linearProgram1/2/3``. :mod:`song.pipeline.crowd.orca` is the Python entry point; tests compare it
 with the reference twin and with RVO2 itself (pyrvo).
@@ -50,18 +51,87 @@ def _insert_sorted(keys, values, n, capacity, key, value):
 
 
 @_jit
-def _agent_neighbours(i, pos, neighbor_dist, max_neighbors, out_idx, out_d):
+def _insert_neighbour(keys, values, n, capacity, key, value):
+    """Insert (key, value) into the list sorted by (key, value), capped at ``capacity``; returns n.
+
+    Ordering ties by index makes the list independent of the order candidates are visited in (grid
+    cells or index order: the same as RVO2's insertion for index order).
+    """
+    if n == capacity:
+        last = n - 1
+        if key > keys[last] or (key == keys[last] and value > values[last]):
+            return n
+    else:
+        n += 1
+    k = n - 1
+    while k != 0 and (key < keys[k - 1] or (key == keys[k - 1] and value < values[k - 1])):
+        keys[k], values[k] = keys[k - 1], values[k - 1]
+        k -= 1
+    keys[k], values[k] = key, value
+    return n
+
+
+GRID_MIN_AGENTS = 64  # below this many agents the all-pairs scan beats building a grid
+
+
+@_jit
+def agent_grid(pos, neighbor_dist):
+    """Agents bucketed in square cells at least ``neighbor_dist`` wide (a counting sort, index order kept).
+
+    Returns (start (C + 1,), items (N,), x0, y0, cell, nx, ny); ``nx == 0`` when there are too few
+    agents for a grid to pay (RVO2 uses a k-d tree instead; a grid is simpler and as fast at walking
+    density, where every cell holds a handful of people).
+    """
+    n = pos.shape[0]
+    if n < GRID_MIN_AGENTS:
+        return np.zeros(1, np.int64), np.zeros(0, np.int64), 0.0, 0.0, 1.0, 0, 0
+    x0, y0, x1, y1 = pos[0, 0], pos[0, 1], pos[0, 0], pos[0, 1]
+    for i in range(n):
+        x0, x1 = min(x0, pos[i, 0]), max(x1, pos[i, 0])
+        y0, y1 = min(y0, pos[i, 1]), max(y1, pos[i, 1])
+    cell = max(neighbor_dist, 1e-6)
+    while ((x1 - x0) / cell + 1) * ((y1 - y0) / cell + 1) > 4 * n + 1024:  # sparse: coarser cells
+        cell *= 2.0
+    nx, ny = int((x1 - x0) / cell) + 1, int((y1 - y0) / cell) + 1
+    cells = np.empty(n, np.int64)
+    start = np.zeros(nx * ny + 1, np.int64)
+    for i in range(n):
+        c = int((pos[i, 1] - y0) / cell) * nx + int((pos[i, 0] - x0) / cell)
+        cells[i] = c
+        start[c + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    items = np.empty(n, np.int64)
+    for i in range(n):
+        items[fill[cells[i]]] = i
+        fill[cells[i]] += 1
+    return start, items, x0, y0, cell, nx, ny
+
+
+@_jit
+def _agent_neighbours(i, pos, neighbor_dist, max_neighbors, out_idx, out_d, grid):
+    """Agent i's nearest ``max_neighbors`` agents within ``neighbor_dist``, nearest first (ties: lower index)."""
     range_sq = neighbor_dist * neighbor_dist
     n = 0
-    for j in range(pos.shape[0]):
-        if j == i:
-            continue
-        dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
-        dist_sq = dx * dx + dy * dy
-        if dist_sq < range_sq:
-            n = _insert_sorted(out_d, out_idx, n, max_neighbors, dist_sq, j)
-            if n == max_neighbors:
-                range_sq = out_d[n - 1]
+    start, items, x0, y0, cell, nx, ny = grid
+    if nx == 0:
+        for j in range(pos.shape[0]):
+            dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
+            dist_sq = dx * dx + dy * dy
+            if j != i and dist_sq < range_sq:
+                n = _insert_neighbour(out_d, out_idx, n, max_neighbors, dist_sq, j)
+        return n
+    cx, cy = int((pos[i, 0] - x0) / cell), int((pos[i, 1] - y0) / cell)
+    for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
+        for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
+            c = gy * nx + gx
+            for k in range(start[c], start[c + 1]):
+                j = items[k]
+                dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
+                dist_sq = dx * dx + dy * dy
+                if j != i and dist_sq < range_sq:
+                    n = _insert_neighbour(out_d, out_idx, n, max_neighbors, dist_sq, j)
     return n
 
 
@@ -341,7 +411,7 @@ def _lp3(lines, n, n_obst, begin, radius, rx, ry, proj):
 
 @_jit
 def _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, lines, work):  # fmt: skip
+                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, lines, work, grid):  # fmt: skip
     """Agent i's ORCA lines into ``lines`` (obstacle lines first); returns (count, obstacle-line count).
 
     Walls use ``wall_radii[i]`` and agents ``radii`` (equal in RVO2; a crowd may keep a personal space
@@ -354,7 +424,7 @@ def _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs,
         n = _obstacle_lines(pos[i], vel[i], wall_radii[i], speeds[i], points, nxt, prv, dirs, convex, left_t,
                             right_t, root, th_obst, lines, found_v, found_d, stack)  # fmt: skip
     n_obst = n
-    count = _agent_neighbours(i, pos, neighbor_dist, max_neighbors, nb_idx, nb_d)
+    count = _agent_neighbours(i, pos, neighbor_dist, max_neighbors, nb_idx, nb_d, grid)
     for k in range(count):
         j = nb_idx[k]
         share = 1.0 if static_full and speeds[j] == 0.0 else 0.5
@@ -381,10 +451,11 @@ def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dir
     lines = np.empty((size, 4))
     proj = np.empty((size, 4))
     work = _work(n_vertices, max_neighbors)
+    grid = agent_grid(pos, neighbor_dist)
     for i in range(n_agents):
         n, n_obst = _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t,
                                  right_t, root, neighbor_dist, max_neighbors, time_horizon, th_obst, time_step,
-                                 static_full, lines, work)  # fmt: skip
+                                 static_full, lines, work, grid)  # fmt: skip
         fail, rx, ry = _lp2(lines, n, speeds[i], pref[i, 0], pref[i, 1], False)
         if fail < n:
             rx, ry = _lp3(lines, n, n_obst, fail, speeds[i], rx, ry, proj)
@@ -402,9 +473,10 @@ def lines_kernel(pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, co
     counts = np.zeros(n_agents, dtype=np.int64)
     n_obstacle = np.zeros(n_agents, dtype=np.int64)
     work = _work(n_vertices, max_neighbors)
+    grid = agent_grid(pos, neighbor_dist)
     for i in range(n_agents):
         counts[i], n_obstacle[i] = _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs,
                                                 convex, left_t, right_t, root, neighbor_dist, max_neighbors,
                                                 time_horizon, th_obst, time_step, static_full, lines[i],
-                                                work)  # fmt: skip
+                                                work, grid)  # fmt: skip
     return lines, counts, n_obstacle

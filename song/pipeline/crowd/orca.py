@@ -227,21 +227,21 @@ _NO_OBSTACLES = (
 )
 
 
-def _kernel_args(
-    positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams, wall_radii=None
-):
-    pos = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
-    n = len(pos)
-    vel = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 2)
-    walls = radii if wall_radii is None else wall_radii
-    walls = np.ascontiguousarray(np.broadcast_to(np.asarray(walls, dtype=np.float64), (n,)))
-    radii = np.ascontiguousarray(np.broadcast_to(np.asarray(radii, dtype=np.float64), (n,)))
-    speeds = np.ascontiguousarray(np.broadcast_to(np.asarray(max_speeds, dtype=np.float64), (n,)))
+def _per_agent(values, n: int) -> np.ndarray:
+    """(n,) contiguous float64 from a scalar or an array (no copy when it already is one: called every frame)."""
+    if isinstance(values, np.ndarray) and values.shape == (n,) and values.dtype == np.float64:
+        return np.ascontiguousarray(values)
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(values, dtype=np.float64), (n,)))
+
+
+def _tree_args(obstacles: ObstacleSet | None) -> tuple:
+    """The obstacle arrays as the kernels take them (built once per obstacle set)."""
     if obstacles is None or obstacles.n_vertices == 0:
-        tree = _NO_OBSTACLES
-    else:
-        o = obstacles
-        tree = (
+        return _NO_OBSTACLES
+    o = obstacles
+    cached = o.__dict__.get("_tree_args")
+    if cached is None:
+        cached = (
             np.ascontiguousarray(o.points, dtype=np.float64),
             np.ascontiguousarray(o.next, dtype=np.int64),
             np.ascontiguousarray(o.prev, dtype=np.int64),
@@ -251,6 +251,19 @@ def _kernel_args(
             np.ascontiguousarray(o.node_right, dtype=np.int64),
             int(o.root),
         )
+        object.__setattr__(o, "_tree_args", cached)  # a frozen dataclass: a private memo, not a field
+    return cached
+
+
+def _kernel_args(
+    positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams, wall_radii=None
+):
+    pos = np.ascontiguousarray(positions, dtype=np.float64).reshape(-1, 2)
+    n = len(pos)
+    vel = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 2)
+    walls = _per_agent(radii if wall_radii is None else wall_radii, n)
+    radii, speeds = _per_agent(radii, n), _per_agent(max_speeds, n)
+    tree = _tree_args(obstacles)
     scalars = (
         float(params.neighbor_dist),
         int(params.max_neighbors),

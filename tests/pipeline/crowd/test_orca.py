@@ -41,6 +41,16 @@ def test_matches_reference_twin(n: int, seed: int, walls: bool) -> None:
     np.testing.assert_allclose(orca_step(*args), ref.orca_step_reference(*args), rtol=0, atol=TWIN_TOL)
 
 
+def test_neighbour_grid_keeps_the_all_pairs_answer_with_ties_and_sparse_crowds() -> None:
+    """From 64 agents neighbours come from a grid: equal distances (a lattice) and far-flung agents (coarse cells)."""
+    lattice = np.stack(np.meshgrid(np.arange(12.0), np.arange(10.0)), -1).reshape(-1, 2) * 0.8  # 120 agents
+    _, vel, pref, radii, speeds = _agents(len(lattice), 5)
+    args = (lattice, vel, pref, np.full(len(lattice), 0.3), speeds, None, PARAMS)
+    np.testing.assert_allclose(orca_step(*args), ref.orca_step_reference(*args), rtol=0, atol=TWIN_TOL)
+    args = (*_agents(300, 6, spread=40.0), None, PARAMS)
+    np.testing.assert_allclose(orca_step(*args), ref.orca_step_reference(*args), rtol=0, atol=TWIN_TOL)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_dense_crowd_uses_the_3d_lp_and_matches_twin(seed: int) -> None:
     """Squeezed agents (2-D LP infeasible) go through linearProgram3, with walls kept hard."""
