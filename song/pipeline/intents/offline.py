@@ -121,6 +121,10 @@ def relatedness(a: SceneObject, b: SceneObject) -> float:
     return float(any((x in ta and y in tb) or (y in ta and x in tb) for x, y in RELATED))
 
 
+MAX_STARTS_PER_OBJECT = 6  # most routines proposed from one object (after two each, while more are needed)
+ROUTE_REPEATS = 3  # most people proposed for the same start and goal objects (distinct spots around them)
+
+
 class OfflineIntentModel:
     """Proposes ``n`` (start object, goal object, activity) routines for a scene, deterministically."""
 
@@ -150,12 +154,18 @@ class OfflineIntentModel:
             score = min(length, 15.0) / 15.0 + 0.6 * cross + 0.8 * relatedness(oa, ob) + 0.5 * rng.random()
             scored.append((score, a, b))
         scored.sort(key=lambda item: -item[0])
-        chosen, used_starts = [], {}
-        for _, a, b in scored:
-            if len(chosen) >= n:
-                break
-            if used_starts.get(a, 0) >= 2 or (b, a) in {(x, y) for x, y, _ in chosen}:
-                continue
-            used_starts[a] = used_starts.get(a, 0) + 1
-            chosen.append((a, b, activity_phrase(smap.venue_type, objects[a], objects[b], rng)))
+        chosen, used_starts, pairs = [], {}, set()
+        # first two routines per start object over distinct pairs (variety); in a scene with few objects
+        # and many people, further passes let more people start at an object and walk a pair again
+        for cap, repeat in ((2, False), (MAX_STARTS_PER_OBJECT, False), (MAX_STARTS_PER_OBJECT, True)):
+            for _, a, b in scored:
+                if len(chosen) >= n:
+                    return chosen
+                if used_starts.get(a, 0) >= cap or (not repeat and ((a, b) in pairs or (b, a) in pairs)):
+                    continue
+                if repeat and sum(x == a and y == b for x, y, _ in chosen) >= ROUTE_REPEATS:
+                    continue
+                used_starts[a] = used_starts.get(a, 0) + 1
+                pairs.add((a, b))
+                chosen.append((a, b, activity_phrase(smap.venue_type, objects[a], objects[b], rng)))
         return chosen

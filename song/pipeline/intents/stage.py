@@ -19,7 +19,7 @@ from song.errors import MissingDependencyError
 from song.pipeline.chain import StageContext, StageOutput
 from song.pipeline.intents.llm import GeminiClient, LLMError, OpenAICompatibleClient, scrub, structured_call
 from song.pipeline.intents.navigation import Walkable, snap_points, walkable
-from song.pipeline.intents.offline import OfflineIntentModel
+from song.pipeline.intents.offline import ROUTE_REPEATS, OfflineIntentModel
 from song.pipeline.intents.schemas import RoutineSelection, SceneDescription, load_prompt
 from song.util import write_json_atomic
 
@@ -36,6 +36,20 @@ def pedestrian_count(area_m2: float, config: SongConfig) -> int:
 def _facing(candidates: np.ndarray, towards: np.ndarray) -> np.ndarray:
     """The candidate point closest to ``towards`` (the side of the object facing the other one)."""
     return candidates[int(np.argmin(np.linalg.norm(candidates - towards, axis=1)))]
+
+
+def _free_spot(candidates: np.ndarray, preferred: np.ndarray, taken: list[np.ndarray], separation: float):
+    """``preferred`` itself if it is ``separation`` from every taken spot, else the nearest candidate that is; None if none."""
+    if not taken:
+        return preferred
+    taken_xy = np.asarray(taken)
+    if np.linalg.norm(taken_xy - preferred, axis=1).min() >= separation:
+        return preferred
+    clear = np.linalg.norm(candidates[:, None] - taken_xy[None], axis=-1).min(axis=1) >= separation
+    if not clear.any():
+        return None
+    ok = candidates[clear]
+    return ok[int(np.argmin(np.linalg.norm(ok - preferred, axis=1)))]
 
 
 def _pair_geodesics(
@@ -73,7 +87,7 @@ def filter_intents(
     objects = package.semantic_map.object_by_id()
     kept: list[Intent] = []
     rejected: list[RejectedIntent] = []
-    routes = set()
+    routes: list[tuple[str, str]] = []
     ends = {}  # facing start/goal points of every proposal between known, reachable objects
     for start_id, goal_id, _ in proposals:
         if len(snaps.get(start_id, ())) and len(snaps.get(goal_id, ())) and start_id in objects and goal_id in objects:
@@ -91,11 +105,21 @@ def filter_intents(
         if len(snaps.get(start_id, ())) == 0 or len(snaps.get(goal_id, ())) == 0:
             rejected.append(RejectedIntent(**base, reason="unreachable", detail="no free standing point next to it"))
             continue
-        if (start_id, goal_id) in routes:
-            rejected.append(RejectedIntent(**base, reason="duplicate"))
+        if routes.count((start_id, goal_id)) >= ROUTE_REPEATS:
+            rejected.append(
+                RejectedIntent(**base, reason="duplicate", detail=f"{ROUTE_REPEATS} people walk it already")
+            )
             continue
         start, goal = ends[(start_id, goal_id)]
-        length = walk.geodesic(distance_rows[(start_id, goal_id)], goal)
+        row = distance_rows[(start_id, goal_id)]
+        # several people may start or end at one object: the nearest free spot around it to the facing one
+        taken = [np.asarray(k.start_xy) for k in kept] + [np.asarray(k.goal_xy) for k in kept]
+        free_start = _free_spot(snaps[start_id], start, taken, cfg.min_spawn_separation_m)
+        if free_start is not None and free_start is not start:
+            start, row = free_start, walk.geodesics_from(free_start[None])[0][0]
+        free_goal = _free_spot(snaps[goal_id], goal, [*taken, start], cfg.min_spawn_separation_m)
+        goal = goal if free_goal is None else free_goal
+        length = walk.geodesic(row, goal)
         if not np.isfinite(length):
             rejected.append(RejectedIntent(**base, reason="unreachable", detail="goal not connected to start"))
             continue
@@ -118,7 +142,7 @@ def filter_intents(
         if len(kept) >= limit:
             rejected.append(RejectedIntent(**base, reason="over_limit"))
             continue
-        routes.add((start_id, goal_id))
+        routes.append((start_id, goal_id))
         kept.append(
             Intent(
                 id=len(kept),

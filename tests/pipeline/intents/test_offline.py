@@ -79,3 +79,18 @@ def test_intents_command_reruns_one_scene(sample_run: Path, tmp_path: Path) -> N
     )
     assert result.exit_code == 0, result.output
     assert (run / "scenes/procthor_house_1/intents.json").read_bytes() == before  # same seed, same intents
+
+
+def test_lobby_with_few_objects_reaches_the_configured_density(tmp_path: Path) -> None:
+    """Several people start and end at one object (distinct spots): the lobby gave 6 of 12 before."""
+    from song.datasets.scenes.generate import generate_scene
+    from song.pipeline.intents.stage import pedestrian_count
+
+    package = load_scene_package(generate_scene("lobby_0002", "lobby", 7, tmp_path, splat=False))
+    config = SongConfig()
+    intents = generate_intents(package, config, np.random.default_rng(0)).intents
+    walk = walkable(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
+    assert len(intents) == pedestrian_count(walk.area_m2, config) == config.intents.max_pedestrians
+    standing = np.array([i.start_xy for i in intents] + [i.goal_xy for i in intents])
+    gaps = np.linalg.norm(standing[:, None] - standing[None], axis=-1) + np.eye(len(standing)) * 9
+    assert gaps.min() >= config.intents.min_spawn_separation_m  # nobody waits on another's spot
