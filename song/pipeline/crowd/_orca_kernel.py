@@ -3,8 +3,8 @@
 The per-agent algorithm of ``_orca_reference.py`` (RVO2's ``Agent.cpp``/``KdTree.cpp`` statement by
 statement) compiled to machine code -- numpy's per-call overhead dominates at the crowd sizes of indoor
 scenes, so the algorithm is written as scalar loops: agent neighbours by sorted insertion capped at
-``max_neighbors`` (from a uniform grid of cells ``neighbor_dist`` wide from 64 agents on, where RVO2
-walks a k-d tree; ties between equally distant agents go to the lower index either way), obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack,
+``max_neighbors`` (from 64 agents on, searched ring by ring in a uniform grid, where RVO2 walks a k-d
+tree; ties between equally distant agents go to the lower index either way), obstacle neighbours by the BSP-tree walk (made iterative with an explicit stack,
 same visiting order), obstacle lines with legs, cut-off and foreign legs, agent lines,
 ``linearProgram1/2/3``. :mod:`song.pipeline.crowd.orca` is the Python entry point; tests compare it
 with the reference twin and with RVO2 itself (pyrvo).
@@ -72,15 +72,17 @@ def _insert_neighbour(keys, values, n, capacity, key, value):
 
 
 GRID_MIN_AGENTS = 64  # below this many agents the all-pairs scan beats building a grid
+GRID_CELLS_PER_RANGE = 4  # cells per neighbour distance: a dense crowd's nearest few lie in the closest cells
 
 
 @_jit
 def agent_grid(pos, neighbor_dist):
-    """Agents bucketed in square cells at least ``neighbor_dist`` wide (a counting sort, index order kept).
+    """Agents bucketed in square cells (a counting sort, index order kept within a cell).
 
-    Returns (start (C + 1,), items (N,), x0, y0, cell, nx, ny); ``nx == 0`` when there are too few
-    agents for a grid to pay (RVO2 uses a k-d tree instead; a grid is simpler and as fast at walking
-    density, where every cell holds a handful of people).
+    Cells are a quarter of ``neighbor_dist`` wide (coarser when the crowd is sparse over a large area,
+    so that there are at most 16 cells per agent). Returns (start (C + 1,), items (N,), x0, y0, cell,
+    nx, ny); ``nx == 0`` when there are too few agents for a grid to pay. RVO2 uses a k-d tree; the
+    grid searched ring by ring gives the same neighbours.
     """
     n = pos.shape[0]
     if n < GRID_MIN_AGENTS:
@@ -89,8 +91,8 @@ def agent_grid(pos, neighbor_dist):
     for i in range(n):
         x0, x1 = min(x0, pos[i, 0]), max(x1, pos[i, 0])
         y0, y1 = min(y0, pos[i, 1]), max(y1, pos[i, 1])
-    cell = max(neighbor_dist, 1e-6)
-    while ((x1 - x0) / cell + 1) * ((y1 - y0) / cell + 1) > 4 * n + 1024:  # sparse: coarser cells
+    cell = max(neighbor_dist / GRID_CELLS_PER_RANGE, 1e-6)
+    while ((x1 - x0) / cell + 1) * ((y1 - y0) / cell + 1) > 16 * n + 4096:
         cell *= 2.0
     nx, ny = int((x1 - x0) / cell) + 1, int((y1 - y0) / cell) + 1
     cells = np.empty(n, np.int64)
@@ -122,16 +124,28 @@ def _agent_neighbours(i, pos, neighbor_dist, max_neighbors, out_idx, out_d, grid
             if j != i and dist_sq < range_sq:
                 n = _insert_neighbour(out_d, out_idx, n, max_neighbors, dist_sq, j)
         return n
+    # rings of cells around i's own; a ring r lies at least (r - 1) cells away: stop once that is beyond
+    # the neighbour distance or, with the list full, beyond its farthest entry
     cx, cy = int((pos[i, 0] - x0) / cell), int((pos[i, 1] - y0) / cell)
-    for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
-        for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
-            c = gy * nx + gx
-            for k in range(start[c], start[c + 1]):
-                j = items[k]
-                dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
-                dist_sq = dx * dx + dy * dy
-                if j != i and dist_sq < range_sq:
-                    n = _insert_neighbour(out_d, out_idx, n, max_neighbors, dist_sq, j)
+    rings = int(math.ceil(neighbor_dist / cell)) + 1
+    for r in range(rings + 1):
+        gap = (r - 1) * cell
+        if r >= 2 and gap * gap >= (out_d[n - 1] if n == max_neighbors else range_sq):
+            break
+        for gy in range(cy - r, cy + r + 1):
+            if gy < 0 or gy >= ny:
+                continue
+            step = 1 if gy == cy - r or gy == cy + r else 2 * r
+            for gx in range(cx - r, cx + r + 1, max(step, 1)):
+                if gx < 0 or gx >= nx:
+                    continue
+                c = gy * nx + gx  # scanned inline: a call per cell costs more than the scan (array arguments)
+                for k in range(start[c], start[c + 1]):
+                    j = items[k]
+                    dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
+                    dist_sq = dx * dx + dy * dy
+                    if j != i and dist_sq < range_sq:
+                        n = _insert_neighbour(out_d, out_idx, n, max_neighbors, dist_sq, j)
     return n
 
 
