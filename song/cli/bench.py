@@ -94,10 +94,12 @@ def diff_command(
 @handle_errors
 def export_habitat_command(
     bench: Path = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
-    out: Path = typer.Argument(..., help="output .json.gz (all episodes), or a folder: <split>/<split>.json.gz"),
+    out: Path = typer.Argument(
+        ..., help="output folder (<split>/<split>.json.gz, scenes/), or one .json.gz (scenes/ beside it)"
+    ),
     version: str | None = typer.Option(None, "--version", help="version (default: latest)"),
 ) -> None:
-    """Habitat PointNav episodes (json.gz, Y-up)."""
+    """Habitat PointNav episodes (json.gz, Y-up), a GLB and a pedestrian file per scene."""
     from song.datasets.bench import open_benchmark
     from song.datasets.bench.habitat import export_habitat
 

@@ -229,7 +229,7 @@ class OrcaAvoidance:
         # the room a walker has now and where its preferred velocity takes it within the obstacle horizon:
         # the comfort shrinks before a narrowing, so that ORCA's wall never holds a walker at its entrance
         ahead = positions + preferred * self.params.time_horizon_obst
-        wall = np.minimum(self.wall_distance.at(positions), self.wall_distance.at(ahead))
+        wall = self.wall_distance.at(np.concatenate([positions, ahead])).reshape(2, -1).min(axis=0)
         # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
         pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
         wall_radii = np.maximum(np.minimum(wall - ROOM_MARGIN_M, radii + self.wall_comfort * pace), radii)

@@ -191,6 +191,23 @@ def test_habitat_projection(graded_run, tmp_path: Path) -> None:
     assert len(episodes) == 10
     first = bench.open(release).episode(episodes[0]["episode_id"])
     np.testing.assert_allclose(from_habitat_point(np.array(episodes[0]["start_position"]))[:2], first.start_xy)
+    # the scene asset: the collision proxy and floor as a Y-up GLB, the start on the floor inside it
+    import trimesh
+
+    glb = trimesh.load(tmp_path / episodes[0]["scene_id"], force="scene")
+    lo, hi = glb.bounds
+    assert lo[1] == pytest.approx(0.0, abs=0.05) and 2.0 < hi[1] < 4.0  # floor at y = 0, walls up +Y
+    start = np.array(episodes[0]["start_position"])
+    assert (lo[[0, 2]] <= start[[0, 2]]).all() and (start[[0, 2]] <= hi[[0, 2]]).all()
+    walls = first.static_map  # the proxy's footprint matches the release's map
+    assert hi[0] - lo[0] == pytest.approx(walls.cells.shape[1] * walls.resolution, abs=0.2)
+    # pedestrians beside it, in Habitat's frame, equal to the release's tracks
+    info = episodes[0]["info"]
+    assert info["song_t0"] == first.t0 and info["song_scene_id"] == first.scene_id
+    tracks = json.loads(gzip.decompress((tmp_path / info["song_pedestrians"]).read_bytes()))["pedestrians"]
+    assert len(tracks) == len(first.pedestrians) > 0
+    ours = first.pedestrians[0]
+    np.testing.assert_allclose(from_habitat_point(np.array(tracks[0]["position"]))[:, :2], ours.xy, atol=1e-4)
     pts = np.random.default_rng(0).normal(size=(20, 3))
     np.testing.assert_allclose(from_habitat_point(to_habitat_point(pts)), pts)
     # heading θ = 0 (our +x) must map to Habitat's +x direction: rotate −Z by the quaternion
@@ -232,7 +249,9 @@ def test_splits_in_the_release_and_eval_defaults_to_test(graded_run, tmp_path: P
     folder = export_habitat(release, tmp_path / "habitat")
     for name, scene in (("train", "scene_1"), ("test", "scene_0")):  # Habitat's <split>/<split>.json.gz
         episodes = json.loads(gzip.decompress((folder / name / f"{name}.json.gz").read_bytes()))["episodes"]
-        assert episodes and {e["scene_id"] for e in episodes} == {scene}
+        assert episodes and {e["info"]["song_scene_id"] for e in episodes} == {scene}
+        assert {e["scene_id"] for e in episodes} == {f"scenes/{scene}.glb"}
+        assert (folder / "scenes" / f"{scene}.glb").is_file()
 
 
 def test_next_export_removes_a_killed_exports_temporary_folder(graded_run, tmp_path: Path) -> None:
