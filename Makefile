@@ -39,12 +39,12 @@ demo: setup
 	$(SONG) eval --bench $(BENCH) --policy straight --policy astar --policy social --out $(EVAL) --workers 2
 	# the vision baseline renders every step: a first slice of the release at 160x120 keeps the demo short
 	$(SONG) eval --bench $(BENCH) --policy depth --resolution 160x120 --limit 8 --out $(EVAL)-depth --workers 2
-	$(SONG) viz bench $(BENCH) --out $(FIGURES) --results $(EVAL)/straight.json --results $(EVAL)/astar.json --results $(EVAL)/social.json
+	$(SONG) viz bench --bench $(BENCH) --out $(FIGURES) --results $(EVAL)/straight.json --results $(EVAL)/astar.json --results $(EVAL)/social.json
 	$(SONG) viz scene $(SCENES)/procthor_house_6 --out $(FIGURES)/scene.png
-	$(SONG) viz crowd $(RUN) --scene procthor_house_6 --out $(FIGURES)
-	$(SONG) viz episode $(BENCH) --episode procthor_house_6-001 --results $(EVAL)/social.parquet --out $(FIGURES)
+	$(SONG) viz crowd --run $(RUN) --scene procthor_house_6 --out $(FIGURES)
+	$(SONG) viz episode --bench $(BENCH) --episode procthor_house_6-001 --results $(EVAL)/social.parquet --out $(FIGURES)
 	$(SONG) viz avatar --out $(FIGURES)/avatars.png --count 6 --gallery $(FIGURES)/avatar_gallery.png
-	$(SONG) viz pov $(BENCH) --episode procthor_house_6-001 --policy depth --out $(FIGURES)
+	$(SONG) viz pov --bench $(BENCH) --episode procthor_house_6-001 --policy depth --out $(FIGURES)
 	$(SONG) viz view $(SCENES)/procthor_house_6 --out $(FIGURES)/procthor_house_6-view.png
 	@echo "results: $(EVAL)/results.md  figures: $(FIGURES)/"
 

@@ -12,6 +12,23 @@ import sys
 
 import typer
 
+
+def _hide_flag_types() -> None:
+    """Help shows no type for on/off flags (Typer 0.29 prints ``<bool>`` after ``--help``, ``--video`` ...)."""
+    option = getattr(getattr(typer, "core", None), "TyperOption", None)
+    original = getattr(option, "display_type_rich", None)
+    if original is None or getattr(original, "_song_flags_hidden", False):
+        return
+
+    def display_type_rich(self, ctx):
+        return None if getattr(self, "is_flag", False) and not getattr(self, "count", False) else original(self, ctx)
+
+    display_type_rich._song_flags_hidden = True
+    option.display_type_rich = display_type_rich
+
+
+_hide_flag_types()
+
 app = typer.Typer(
     name="song",
     help="SONG: build social-navigation benchmarks from indoor scenes.",

@@ -30,6 +30,10 @@ SetOption = typer.Option(
     help="override one config value (repeatable), e.g. crowd.agent_radius_m=0.3",
 )
 WorkersOption = typer.Option(0, "--workers", "-j", min=0, help="worker processes (0 = all cores)")
+BenchOption = typer.Option(None, "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder")
+# the benchmark as a bare first argument, as `song viz` took it before every command but `song bench …`
+# took --bench: still accepted, not advertised
+BenchArgument = typer.Argument(None, hidden=True, metavar="BENCH")
 
 
 def handle_errors(func: F) -> F:
@@ -78,6 +82,30 @@ def status_table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> 
             cells.append(value)
         table.add_row(*cells)
     return table
+
+
+def bench_location(positional: str | None, option: str | None) -> str:
+    """The benchmark a command was given, as ``--bench DIR`` (or, as before, a bare first argument)."""
+    if positional and option and positional != option:
+        raise typer.BadParameter(f"two benchmarks given ('{positional}' and --bench '{option}'): give one")
+    value = option or positional
+    if not value:
+        raise typer.BadParameter("missing --bench DIR (a benchmark folder, DIR@X.Y.Z, or a release folder)")
+    return value
+
+
+def eval_results(path: Path, suffix: str) -> Path:
+    """The file of one policy's ``song eval`` output with ``suffix`` (.json summary, .parquet per episode).
+
+    ``path`` may name either file or their common stem (``runs/eval/social``); the other is found beside it.
+    """
+    candidate = path.with_suffix(suffix) if path.suffix in (".json", ".parquet", ".md", "") else path
+    if not candidate.is_file():
+        raise typer.BadParameter(
+            f"{path}: no {candidate.name} beside it (--results takes a policy's output from song eval: "
+            f"NAME.json, NAME.parquet or NAME in the --out folder)"
+        )
+    return candidate
 
 
 def parse_size(text: str, option: str) -> tuple[int, int]:

@@ -7,7 +7,9 @@ from pathlib import Path
 import typer
 
 from song.cli import app
-from song.cli.common import console, handle_errors
+from song.cli.common import BenchArgument, BenchOption, bench_location, console, eval_results, handle_errors
+
+RESULTS_HELP = "a policy's output from song eval: NAME.json, NAME.parquet or NAME in its --out folder"
 
 viz_app = typer.Typer(help="Top-down pictures and videos.", no_args_is_help=True)
 app.add_typer(viz_app, name="viz")
@@ -56,7 +58,8 @@ def view(
 @viz_app.command("crowd")
 @handle_errors
 def crowd(
-    run: Path = typer.Argument(..., help="run folder"),
+    positional: Path | None = typer.Argument(None, hidden=True, metavar="RUN"),  # as before: the run, bare
+    run: Path | None = typer.Option(None, "--run", help="run folder made by song synth"),
     scene: str = typer.Option(..., "--scene", help="scene id"),
     out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
     video: bool = typer.Option(True, "--video/--no-video", help="also write an MP4"),
@@ -64,28 +67,35 @@ def crowd(
     """All pedestrian trajectories over the map (PNG) and an animation (MP4)."""
     from song.viz.crowd import render_crowd
 
-    _report(render_crowd(run, scene, out, video))
+    if positional and run and positional != run:
+        raise typer.BadParameter(f"two runs given ('{positional}' and --run '{run}'): give one")
+    if not (run or positional):
+        raise typer.BadParameter("missing --run DIR (a run folder made by song synth)")
+    _report(render_crowd(run or positional, scene, out, video))
 
 
 @viz_app.command("episode")
 @handle_errors
 def episode(
-    bench: str = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
+    positional: str | None = BenchArgument,
+    bench: str | None = BenchOption,
     episode_id: str = typer.Option(..., "--episode", help="episode id"),
-    results: Path | None = typer.Option(None, "--results", help="per-episode results Parquet from song eval"),
+    results: Path | None = typer.Option(None, "--results", help=RESULTS_HELP),
     out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
     video: bool = typer.Option(True, "--video/--no-video", help="also write an MP4"),
 ) -> None:
     """Map, pedestrians, the A* path and (with --results) the robot's path and events."""
     from song.viz.episode import render_episode
 
-    _report(render_episode(bench, episode_id, out, results, video))
+    log = eval_results(results, ".parquet") if results else None
+    _report(render_episode(bench_location(positional, bench), episode_id, out, log, video))
 
 
 @viz_app.command("pov")
 @handle_errors
 def pov(
-    bench: str = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
+    positional: str | None = BenchArgument,
+    bench: str | None = BenchOption,
     episode_id: str = typer.Option(..., "--episode", help="episode id"),
     policy: str = typer.Option("depth", "--policy", help="straight | astar | social | depth | module:Class"),
     out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
@@ -96,20 +106,22 @@ def pov(
     from song.cli.common import parse_size
     from song.viz.pov import render_pov
 
-    _report(render_pov(bench, episode_id, policy, out, parse_size(size, "--size"), backend))
+    _report(render_pov(bench_location(positional, bench), episode_id, policy, out, parse_size(size, "--size"), backend))
 
 
 @viz_app.command("bench")
 @handle_errors
 def bench(
-    bench: str = typer.Argument(..., help="benchmark folder or DIR@X.Y.Z"),
+    positional: str | None = BenchArgument,
+    bench: str | None = BenchOption,
     out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
-    results: list[Path] = typer.Option(None, "--results", help="summary JSON(s) from song eval"),
+    results: list[Path] = typer.Option(None, "--results", help=RESULTS_HELP + " (repeatable: one per policy)"),
 ) -> None:
     """Fig. 3 left (encounters vs L*), factor histograms, mode × difficulty, results bars."""
     from song.viz.bench import render_bench
 
-    _report(render_bench(bench, out, results))
+    summaries = [eval_results(path, ".json") for path in results or []]
+    _report(render_bench(bench_location(positional, bench), out, summaries))
 
 
 @viz_app.command("avatar")

@@ -119,6 +119,12 @@ def test_help_starts_without_the_heavy_libraries() -> None:
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr
 
 
+@pytest.mark.parametrize("command", [["synth"], ["viz", "episode"], ["bench", "diff"], ["export-bench"], ["eval"]])
+def test_help_shows_no_type_after_on_off_flags(command: list[str]) -> None:
+    code, out = _invoke([*command, "--help"])
+    assert code == 0 and "--help" in out and "<bool>" not in out
+
+
 def test_spacing_help_names_the_real_default() -> None:
     from song.config import SURFEL_SPACING_M
 

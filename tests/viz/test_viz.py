@@ -29,7 +29,7 @@ def test_viz_scene_and_crowd(sample_run: Path, tmp_path: Path) -> None:
     floor = np.all(np.abs(image.astype(int) - [238, 243, 245]) < 12, axis=-1)  # floor colour (BGR)
     assert floor.mean() > 0.02
     result = runner.invoke(
-        app, ["viz", "crowd", str(sample_run), "--scene", "procthor_house_6", "--out", str(tmp_path)]
+        app, ["viz", "crowd", "--run", str(sample_run), "--scene", "procthor_house_6", "--out", str(tmp_path)]
     )
     assert result.exit_code == 0, result.output
     _check(tmp_path / "procthor_house_6_crowd.png")
@@ -44,8 +44,8 @@ def test_viz_bench_and_episode(tmp_path: Path) -> None:
         ).exit_code
         == 0
     )
-    result = runner.invoke(
-        app, ["viz", "bench", str(GOLDEN), "--out", str(tmp_path), "--results", str(tmp_path / "ev/astar.json")]
+    result = runner.invoke(  # --results: a policy's output named by its stem
+        app, ["viz", "bench", "--bench", str(GOLDEN), "--out", str(tmp_path), "--results", str(tmp_path / "ev/astar")]
     )
     assert result.exit_code == 0, result.output
     for name in ("encounters_vs_length", "factors", "modes", "results"):
@@ -55,11 +55,11 @@ def test_viz_bench_and_episode(tmp_path: Path) -> None:
         [
             "viz",
             "episode",
-            str(GOLDEN),
+            str(GOLDEN),  # the benchmark as a bare first argument, as before --bench
             "--episode",
             "scene_0-001",
             "--results",
-            str(tmp_path / "ev/astar.parquet"),
+            str(tmp_path / "ev/astar.json"),  # the summary's name: the per-episode table beside it is read
             "--out",
             str(tmp_path),
         ],
@@ -67,6 +67,13 @@ def test_viz_bench_and_episode(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     image = _check(tmp_path / "scene_0-001.png")
     assert (np.abs(image.astype(int) - [200, 40, 40]).sum(axis=-1) < 60).any()  # the dashed A* path (BGR)
+    for args, message in (
+        (["viz", "episode", str(GOLDEN), "--bench", str(tmp_path), "--episode", "x"], "two benchmarks"),
+        (["viz", "episode", "--episode", "x"], "missing --bench"),
+        (["viz", "bench", "--bench", str(GOLDEN), "--results", str(tmp_path / "ev/nope")], "--results takes"),
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2 and message in result.output, result.output
 
 
 def test_viz_pov_writes_an_h264_video_and_a_strip(tmp_path: Path) -> None:
@@ -75,7 +82,7 @@ def test_viz_pov_writes_an_h264_video_and_a_strip(tmp_path: Path) -> None:
 
     result = CliRunner().invoke(
         app,
-        ["viz", "pov", str(GOLDEN), "--episode", "scene_0-001", "--policy", "straight", "--size", "96x72",
+        ["viz", "pov", "--bench", str(GOLDEN), "--episode", "scene_0-001", "--policy", "straight", "--size", "96x72",
          "--out", str(tmp_path)],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
