@@ -9,7 +9,7 @@ BENCH ?= runs/demo-bench
 SAMPLES ?= datasets/sample_scenes
 SCENES ?= runs/scenes
 
-.PHONY: setup demo test lint format bench clean
+.PHONY: setup demo test api lint format bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -51,11 +51,18 @@ demo: setup
 test: setup
 	$(VENV)/bin/ruff check song tests benchmarks
 	$(VENV)/bin/ruff format --check song tests benchmarks
+	$(MAKE) api
 	$(VENV)/bin/pytest -q -m "not slow"
+
+# the API reference, generated from the docstrings (a warning, e.g. a module that fails to import, fails it)
+api: setup
+	rm -rf build/api
+	$(PY) -W error::UserWarning -m pdoc --docformat google --output-directory build/api song
+	@echo "API reference: build/api/index.html"
 
 lint: setup
 	$(VENV)/bin/ruff check --fix song tests benchmarks
 	$(VENV)/bin/ruff format song tests benchmarks
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) runs .pytest_cache build
