@@ -8,10 +8,15 @@ Frame and conventions (written to ``meta.json`` under ``amass`` as well):
   change of basis ``v_ours = C · v_smpl``; joint ``j > 0`` rotations are conjugated
   ``q_smpl = Cᵀ q_ours C`` and the root becomes ``root_orient = q_ours,0 · C`` (world-from-SMPL-native),
   so a real SMPL-H body driven by these parameters faces the same way as our skeleton.
-- **Translation**: SMPL places the posed pelvis at ``J0 + trans`` where ``J0`` is the rest pelvis in
-  the body-native frame. We have no SMPL shape, so ``J0`` is our own rest pelvis expressed in that
-  frame, ``J0 = Cᵀ · rest_pelvis = (0, pelvis height, 0)``; ``trans = root_pos − J0``. A consumer using
-  a real SMPL-H model with its own ``J0'`` adds ``J0 − J0'`` to ``trans``.
+- **Translation** (AMASS's convention): an SMPL-family body posed with ``root_orient`` rotates about
+  its rest pelvis ``J0`` (model coordinates) and is then shifted by ``trans``, so its pelvis lands at
+  ``J0 + trans`` whatever the root orientation. ``J0`` is the model's pelvis at zero betas:
+  ``SMPL_PELVIS_J0`` below, the SMPL neutral model's joint regressor applied to its template (the
+  model's origin is near the navel, its soles about 1.2 m below). We write
+  ``trans = root_pos − SMPL_PELVIS_J0``, so a neutral SMPL/SMPL-H body at zero betas puts its pelvis on
+  our pelvis. A consumer with another model or shape (pelvis ``J0'`` from its own regressor) adds
+  ``SMPL_PELVIS_J0 − J0'`` to ``trans``; ``meta.json`` records the ``J0`` used. (Until 0.1 of this
+  module ``J0`` was our own rest pelvis, ``(0, pelvis height, 0)``: an SMPL body landed ~1.1 m high.)
 - **Joints**: SMPL-H has 52 joints: 22 body joints (our 0–21, same order) and 2 × 15 finger joints
   (left then right; per hand index1-3, middle1-3, pinky1-3, ring1-3, thumb1-3). Our joints 22/23
   (``left_hand``/``right_hand``) are SMPL's hand end points at the middle-finger knuckle; their
@@ -60,18 +65,22 @@ AMASS_KEYS = (
 )
 
 
-def pelvis_j0(rest_joints: np.ndarray) -> np.ndarray:
-    """``J0 (3,)``: our rest pelvis in the SMPL body-native frame."""
-    return C_SMPL_TO_BODY.T @ np.asarray(rest_joints, dtype=np.float64)[0]
+# the SMPL neutral model's rest pelvis at zero betas, model coordinates (Y up, +Z forward), metres:
+# J_regressor · v_template of SMPL (Loper et al., SIGGRAPH Asia 2015), as tabulated by SMPL tool chains
+SMPL_PELVIS_J0 = np.array([-0.001795, -0.223333, 0.028219])
 
 
-def to_amass(local_quats: np.ndarray, root_pos: np.ndarray, rest_joints: np.ndarray, fps: float) -> dict[str, Any]:
+def pelvis_j0() -> np.ndarray:
+    """``J0 (3,)``: the rest pelvis that ``trans`` is measured from (``SMPL_PELVIS_J0``; module docstring)."""
+    return SMPL_PELVIS_J0.copy()
+
+
+def to_amass(local_quats: np.ndarray, root_pos: np.ndarray, fps: float) -> dict[str, Any]:
     """AMASS arrays of a motion.
 
     Args:
         local_quats: ``(T, 24, 4)`` wxyz, our body frame (see :mod:`song.geometry.fk`).
         root_pos: ``(T, 3)`` world pelvis, metres.
-        rest_joints: ``(24, 3)`` rest skeleton (for ``J0``).
         fps: frame rate, Hz.
 
     Returns:
@@ -88,7 +97,7 @@ def to_amass(local_quats: np.ndarray, root_pos: np.ndarray, rest_joints: np.ndar
     for ours, slot in HAND_SLOTS.items():
         poses[:, slot] = aa[:, ours]
     poses = poses.reshape(n, 156)
-    trans = np.asarray(root_pos, dtype=np.float64) - pelvis_j0(rest_joints)
+    trans = np.asarray(root_pos, dtype=np.float64) - pelvis_j0()
     return {
         "poses": poses,
         "trans": trans,
@@ -128,7 +137,7 @@ def read_amass(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
-def from_amass(amass: dict[str, np.ndarray], rest_joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def from_amass(amass: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Decode AMASS arrays back to our ``local_quats (T, 24, 4)`` (w ≥ 0) and ``root_pos (T, 3)``."""
     poses = np.asarray(amass["poses"], dtype=np.float64)
     n = len(poses)
@@ -142,5 +151,5 @@ def from_amass(amass: dict[str, np.ndarray], rest_joints: np.ndarray) -> tuple[n
     q[:, 0] = quat_mul(smpl[:, 0], _QC_INV)
     q[:, 1:] = quat_mul(quat_mul(_QC, smpl[:, 1:]), _QC_INV)
     q = np.where(q[..., :1] < 0, -q, q)
-    root = np.asarray(amass["trans"], dtype=np.float64) + pelvis_j0(rest_joints)
+    root = np.asarray(amass["trans"], dtype=np.float64) + pelvis_j0()
     return q, root

@@ -53,7 +53,7 @@ def write_motion(traj_dir: str | Path, motion: Motion, meta: dict[str, Any], fps
     traj_dir.mkdir(parents=True, exist_ok=True)
     arrays = motion_arrays(motion)
     write_npz_atomic(traj_dir / MOTION_FILE, **arrays)
-    amass = to_amass(arrays["local_quats"], arrays["root_pos"], arrays["rest_joints"], fps)
+    amass = to_amass(arrays["local_quats"], arrays["root_pos"], fps)
     write_amass(traj_dir / AMASS_FILE, amass)
     write_json_atomic(traj_dir / MOTION_META_FILE, meta)
     return [traj_dir / MOTION_FILE, traj_dir / AMASS_FILE, traj_dir / MOTION_META_FILE]

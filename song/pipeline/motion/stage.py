@@ -82,7 +82,8 @@ def _meta(motion: Motion, traj: Trajectory, alignment: dict, quality: dict, gene
         "amass": {
             "layout": "SMPL-H poses (T, 156) = root 3 + 21 body joints 63 + 30 hand joints 90; SMPL-X spellings too",
             "frame": AMASS_FRAME,
-            "J0": np.round(pelvis_j0(motion.rest_joints), 6).tolist(),
+            "J0": np.round(pelvis_j0(), 6).tolist(),
+            "J0_source": "SMPL neutral model, zero betas (pelvis = trans + J0; another model: trans += J0 - J0')",
             "hand_joints": {str(k): v for k, v in HAND_SLOTS.items()},
             "betas": "16 zeros (shape given by rest_joints / height_m)",
         },

@@ -23,7 +23,7 @@ def _motion(n: int = 40, height: float = 1.72):
 
 def test_file_round_trip_is_exact(tmp_path):
     rest, quats, root = _motion()
-    amass = to_amass(quats, root, rest, 30.0)
+    amass = to_amass(quats, root, 30.0)
     write_amass(tmp_path / "a.npz", amass)
     back = read_amass(tmp_path / "a.npz")
     for key, value in amass.items():
@@ -41,7 +41,7 @@ def test_decode_and_fk_reproduce_joints():
     rest, quats, root = _motion()
     q32, r32 = quats.astype(np.float32).astype(np.float64), root.astype(np.float32).astype(np.float64)
     joints = forward_kinematics(rest, q32, r32)[0]
-    decoded_q, decoded_root = from_amass(to_amass(q32, r32, rest, 30.0), rest)
+    decoded_q, decoded_root = from_amass(to_amass(q32, r32, 30.0))
     assert np.abs(forward_kinematics(rest, decoded_q, decoded_root)[0] - joints).max() < 1e-3
     assert np.abs(forward_kinematics(rest, decoded_q, decoded_root)[0] - joints).max() < 1e-6  # float32 quats
     assert np.abs(quat_to_matrix(decoded_q) - quat_to_matrix(quat_normalize(q32))).max() < 1e-9
@@ -49,7 +49,7 @@ def test_decode_and_fk_reproduce_joints():
 
 def test_smplx_only_file_is_read(tmp_path):
     rest, quats, root = _motion(5)
-    amass = to_amass(quats, root, rest, 30.0)
+    amass = to_amass(quats, root, 30.0)
     np.savez(tmp_path / "x.npz", trans=amass["trans"], root_orient=amass["root_orient"], pose_body=amass["pose_body"])
     back = read_amass(tmp_path / "x.npz")
     assert np.array_equal(back["poses"][:, :66], amass["poses"][:, :66])
@@ -64,21 +64,24 @@ def test_frame_conventions():
     identity = np.zeros((1, 24, 4))
     identity[..., 0] = 1.0
     root = np.array([[1.0, 2.0, rest[0, 2]]])
-    amass = to_amass(identity, root, rest, 30.0)
+    amass = to_amass(identity, root, 30.0)
     # an unrotated body (facing world +x) has root_orient = C: SMPL's +Z (forward) maps to world +x
-    root_orient = quat_to_matrix(from_amass(amass, rest)[0][0, 0]) @ C_SMPL_TO_BODY
+    root_orient = quat_to_matrix(from_amass(amass)[0][0, 0]) @ C_SMPL_TO_BODY
     assert np.allclose(root_orient @ [0, 0, 1], [1, 0, 0])
     assert np.allclose(root_orient @ [0, 1, 0], [0, 0, 1])
     assert np.allclose(root_orient @ [1, 0, 0], [0, 1, 0])
     assert not amass["poses"][:, 3:].any()
-    # SMPL's pelvis = J0 + trans; J0 is our rest pelvis in the native frame (up = SMPL +Y)
-    assert np.allclose(pelvis_j0(rest), [0, rest[0, 2], 0])
-    assert np.allclose(amass["trans"] + pelvis_j0(rest), root)
+    # AMASS: an SMPL body's pelvis lands at J0 + trans, J0 the model's rest pelvis at zero betas (SMPL
+    # neutral: 22 cm below the model origin, 2.8 cm forward) -- not our pelvis height above the floor
+    assert np.allclose(pelvis_j0(), [-0.001795, -0.223333, 0.028219])
+    np.testing.assert_allclose(amass["trans"] + pelvis_j0(), root, atol=1e-12)
+    # J0 is added unrotated (the root turns about it): world z gets J0's model z, world y its model y
+    np.testing.assert_allclose(amass["trans"][0], [1.0 + 0.001795, 2.0 + 0.223333, rest[0, 2] - 0.028219])
 
 
 def test_hand_joints_map_to_middle_knuckles():
     rest, quats, root = _motion(3)
-    poses = to_amass(quats, root, rest, 30.0)["poses"].reshape(3, 52, 3)
+    poses = to_amass(quats, root, 30.0)["poses"].reshape(3, 52, 3)
     used = np.flatnonzero(np.abs(poses).sum(axis=(0, 2)) > 0)
     assert set(used.tolist()) <= set(range(22)) | {25, 40}
     assert {25, 40} <= set(used.tolist())
