@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from song.cli import app
-from song.cli.common import console, handle_errors, status_table
+from song.cli.common import console, escape, handle_errors, status_table
 
 bench_app = typer.Typer(help="Benchmark releases: list, verify, diff, export to Habitat.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
@@ -57,7 +57,7 @@ def verify_command(
     report = verify_release(resolve_version(bench, version))
     for kind in ("missing", "extra", "altered"):
         for rel in getattr(report, kind):
-            console.print(f"[red]{kind}[/red] {rel}")
+            console.print(f"[red]{kind}[/red] {escape(str(rel))}")
     if not report.fingerprint_ok:
         console.print("[red]fingerprint[/red] manifest does not match info.json's fingerprint")
     console.print(f"{report.version}: {'ok' if report.ok else 'FAILED'}")

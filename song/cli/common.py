@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from song.errors import SongError
@@ -46,12 +47,12 @@ def handle_errors(func: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return func(*args, **kwargs)
-        except SongError as exc:
-            err_console.print(f"[red]error:[/red] {exc}", soft_wrap=True)
+        except SongError as exc:  # escaped: messages hold brackets ('song[usd]', paths) rich would eat
+            err_console.print(f"[red]error:[/red] {escape(str(exc))}", soft_wrap=True)
             raise typer.Exit(2) from None
         except OSError as exc:
             where = f"{exc.filename}: " if exc.filename else ""
-            err_console.print(f"[red]error:[/red] {where}{exc.strerror or exc}", soft_wrap=True)
+            err_console.print(f"[red]error:[/red] {escape(where + str(exc.strerror or exc))}", soft_wrap=True)
             raise typer.Exit(2) from None
 
     return wrapper  # type: ignore[return-value]

@@ -8,7 +8,7 @@ import typer
 from rich import box
 
 from song.cli import app
-from song.cli.common import console, handle_errors, status_table
+from song.cli.common import console, escape, handle_errors, status_table
 from song.errors import SongError
 
 # the default is song.config.SURFEL_SPACING_M, resolved when a command runs (the CLI starts without the config)
@@ -73,7 +73,7 @@ def check(folder: Path = typer.Argument(..., help="a scene package, or a folder 
     table.columns[0].no_wrap = True
     console.print(table)
     for name, message in problems:  # whole, unwrapped lines: easy to grep and copy
-        console.print(f"[red]FAILED[/red] {name}: {message}", soft_wrap=True)
+        console.print(f"[red]FAILED[/red] {escape(name)}: {escape(message)}", soft_wrap=True)
     for name, message in warnings:
         console.print(f"[yellow]warning[/yellow] {name}: {message}", soft_wrap=True)
     failed = len({name for name, _ in problems})

@@ -146,3 +146,20 @@ def test_an_llm_fallback_is_printed_per_scene_and_in_the_summary(tmp_path) -> No
     assert code == 0, out
     assert "shop_0003: the LLM failed, the offline model stood in" in out
     assert "LLM fallbacks: 1 scenes used the offline model" in out
+
+
+def test_a_missing_extra_names_it_in_brackets() -> None:
+    """Rich markup must not swallow '[usd]' from the install hint (it printed `pip install 'song'`)."""
+    from song.cli.common import handle_errors
+    from song.errors import MissingDependencyError
+
+    @handle_errors
+    def fails() -> None:
+        raise MissingDependencyError("pxr", "usd")
+
+    import typer
+
+    probe = typer.Typer()
+    probe.command()(fails)
+    result = CliRunner().invoke(probe, [])
+    assert result.exit_code == 2 and "pip install 'song[usd]'" in result.output, result.output

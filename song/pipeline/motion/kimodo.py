@@ -350,7 +350,7 @@ class KimodoGenerator:
         try:
             import torch
         except ImportError:
-            raise MissingDependencyError("torch", "kimodo") from None
+            raise MissingDependencyError("torch", "torch") from None
         kimodo = _kimodo("kimodo")
         loader = _kimodo("kimodo.model.load_model")
         checkpoint = kimodo_checkpoint(self.cfg.kimodo_model)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from song.config import MotionConfig
 from song.errors import StageError
@@ -23,6 +22,7 @@ from song.pipeline.motion.stage import synthesize_motions
 from song.pipeline.motion.synthetic import trajectory_from_profiles
 from tests.pipeline.motion import fake_kimodo
 
+torch = pytest.importorskip("torch")  # Kimodo is a torch model (the torch extra; dev installs it)
 PROMPT = MotionConfig().prompt
 
 
