@@ -56,3 +56,33 @@ def overlap_push(
                 push[i, 0] += dx * scale
                 push[i, 1] += dy * scale
     return push, found
+
+
+@numba.njit(cache=True, nogil=True)
+def preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, dt):  # pragma: no cover
+    """(N, 2) Detour's smooth steer toward the corners, slowing within 2r of the goal (0 for non-walkers).
+
+    Toward ``cur`` pulled early by ``nxt`` (``dir0 − dir1 · |dir0| / 2``, Detour's
+    ``calcSmoothSteerDirection``) when the corner is not the goal; the speed falls linearly within
+    ``2 · radius`` of the goal and never overshoots it in one step ``dt``.
+    """
+    n = len(pos)
+    pref = np.zeros((n, 2))
+    for i in range(n):
+        if not moving[i]:
+            continue
+        d0x, d0y = cur[i, 0] - pos[i, 0], cur[i, 1] - pos[i, 1]
+        len0 = np.hypot(d0x, d0y)
+        d1x, d1y = nxt[i, 0] - pos[i, 0], nxt[i, 1] - pos[i, 1]
+        len1 = max(np.hypot(d1x, d1y), 1e-3)
+        d1x, d1y = d1x / len1, d1y / len1
+        sx, sy = d0x, d0y
+        if has_next[i]:
+            sx, sy = d0x - d1x * (0.5 * len0), d0y - d1y * (0.5 * len0)
+        d_goal = np.hypot(goal[i, 0] - pos[i, 0], goal[i, 1] - pos[i, 1])
+        desired = speed[i] * min(1.0, d_goal / (2.0 * radius))
+        if not has_next[i]:
+            desired = min(desired, len0 / dt)
+        norm = max(np.hypot(sx, sy), 1e-9)
+        pref[i, 0], pref[i, 1] = sx / norm * desired, sy / norm * desired
+    return pref

@@ -23,3 +23,22 @@ def overlap_push_reference(target: np.ndarray, moving: np.ndarray, min_dist: flo
     push = (diff / np.maximum(dist, 1e-9)[..., None] * (share * overlap)[..., None]).sum(axis=1)
     push[~moving] = 0.0
     return push, bool(overlap.any())
+
+
+def preferred_velocities_reference(pos, cur, nxt, has_next, goal, speed, moving, radius, dt) -> np.ndarray:
+    """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.preferred_velocities` (vectorised numpy)."""
+    pref = np.zeros_like(pos)
+    idx = np.flatnonzero(moving)
+    if not len(idx):
+        return pref
+    c0, c1, nxt_ok, p = cur[idx], nxt[idx], has_next[idx], pos[idx]
+    dir0 = c0 - p
+    len0 = np.hypot(dir0[:, 0], dir0[:, 1])
+    dir1 = c1 - p
+    dir1 /= np.maximum(np.hypot(dir1[:, 0], dir1[:, 1]), 1e-3)[:, None]
+    steer = np.where(nxt_ok[:, None], dir0 - dir1 * (0.5 * len0)[:, None], dir0)
+    d_goal = np.hypot(*(goal[idx] - p).T)
+    desired = speed[idx] * np.minimum(1.0, d_goal / (2.0 * radius))
+    desired = np.where(nxt_ok, desired, np.minimum(desired, len0 / dt))
+    pref[idx] = steer / np.maximum(np.hypot(steer[:, 0], steer[:, 1]), 1e-9)[:, None] * desired[:, None]
+    return pref

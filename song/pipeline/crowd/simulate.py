@@ -37,7 +37,7 @@ import numpy as np
 from song.config import CrowdConfig
 from song.datasets.run.intents import Intent
 from song.geometry.navmesh import Navmesh, carve_discs
-from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push
+from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities
 from song.pipeline.crowd.avoidance import LocalAvoidance
 
 ARRIVE_M = 0.05  # within this of the goal a pedestrian has arrived (it then stands there)
@@ -319,23 +319,7 @@ def _update_corners(w: _Walkers, mesh: Navmesh, moving: np.ndarray, check: bool)
 
 def _preferred(w: _Walkers, moving: np.ndarray, radius: float, dt: float) -> np.ndarray:
     """Preferred velocities: Detour's smooth steer toward the corners, slowing within 2r of the goal."""
-    pref = np.zeros_like(w.pos)
-    idx = np.flatnonzero(moving)
-    if not len(idx):
-        return pref
-    c0, c1, has_next = w.cur[idx], w.nxt[idx], w.has_next[idx]
-    pos = w.pos[idx]
-    dir0 = c0 - pos
-    len0 = _length(dir0)
-    dir1 = c1 - pos
-    dir1 /= np.maximum(_length(dir1), 1e-3)[:, None]
-    # turn anticipation: dvel = dir0 - dir1 * len0 * 0.5 (Detour's calcSmoothSteerDirection)
-    steer = np.where(has_next[:, None], dir0 - dir1 * (0.5 * len0)[:, None], dir0)
-    d_goal = _length(w.goal[idx] - pos)
-    desired = w.speed[idx] * np.minimum(1.0, d_goal / (2.0 * radius))
-    desired = np.where(has_next, desired, np.minimum(desired, len0 / dt))  # do not overshoot the goal
-    pref[idx] = steer / np.maximum(_length(steer), 1e-9)[:, None] * desired[:, None]
-    return pref
+    return preferred_velocities(w.pos, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, radius, dt)
 
 
 def _separate(w: _Walkers, mesh: Navmesh, target: np.ndarray, moving: np.ndarray, radius: float, dt: float):

@@ -6,8 +6,12 @@ import numpy as np
 import pytest
 
 from song.datasets.scenes import load_scene_package
-from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push
-from song.pipeline.crowd._simulate_reference import near_walkers_reference, overlap_push_reference
+from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities
+from song.pipeline.crowd._simulate_reference import (
+    near_walkers_reference,
+    overlap_push_reference,
+    preferred_velocities_reference,
+)
 from song.pipeline.crowd.avoidance import make_avoidance
 from song.pipeline.crowd.navmesh import scene_navmesh
 from song.pipeline.crowd.simulate import plan_crowd
@@ -61,3 +65,8 @@ def test_compiled_pair_loops_equal_their_reference_twins() -> None:
         ref, ref_found = overlap_push_reference(pos, moving, 0.6)
         np.testing.assert_allclose(push, ref, atol=1e-12)
         assert found == ref_found
+        cur, nxt, goal = (pos + rng.normal(0, 2.0, (n, 2)) for _ in range(3))
+        has_next, speed = rng.random(n) < 0.5, rng.uniform(0.5, 1.5, n)
+        goal[:2] = pos[:2] + 0.1  # slowing down at the goal
+        args = (pos, cur, nxt, has_next, goal, speed, moving, 0.25, 1 / 30)
+        np.testing.assert_allclose(preferred_velocities(*args), preferred_velocities_reference(*args), atol=1e-12)
