@@ -63,6 +63,9 @@ OVERLAP_PASSES = 3
 OVERLAP_MARGIN_M = 0.002  # overlap passes separate centres to 2r + this
 SEPARATION_REACH_M = 0.15  # beyond 2r + this (two frames' steps at 1.8 m/s, and more) no overlap pass joins two people
 SNAPSHOT_EVERY = 30  # frames between saved states a removal can roll back to (1 s)
+# a replan keeps this much more than body contact from everyone standing: a path squeezed past someone at
+# 2r (a wall on the other side) is legal but leaves avoidance no room, and the walker stalls in it again
+REPLAN_CLEARANCE_M = 0.1
 MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
 
 
@@ -393,9 +396,12 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
     t, stall_s, radius = frame / cfg.fps, cfg.stall_time_s, cfg.agent_radius_m
     done = moving & (_length(w.goal - w.pos) < ARRIVE_M)
     for k in np.flatnonzero(done):
+        aside = w.stops[k][w.leg[k]][2]
         if not _next_leg(w, mesh, int(k), t):
             w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
             w.arrival[k] = t
+        elif aside:
+            _resume_around_standing(w, mesh, int(k), moving, radius, frame)
     idx = np.flatnonzero(moving & ~done)
     if not len(idx):
         return {}
@@ -406,6 +412,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
     for k in idx[~better & (t - w.last_progress[idx] > stall_s)]:
         if w.stops[k][w.leg[k]][2]:  # the crowd keeps it from its spot aside: it waits where it got to
             _next_leg(w, mesh, int(k), t)
+            _resume_around_standing(w, mesh, int(k), moving, radius, frame)
             continue
         if w.replanned[k] and w.yields[k] < MAX_YIELDS:
             # deadlocked face to face: step out of the others' way for a while, then try again
@@ -427,6 +434,14 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
             _mark_influence(w, [k], frame)  # it sends people standing in its way off
             _make_room(w, mesh, k, moving, radius, t)
     return failed
+
+
+def _resume_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, frame: int):
+    """After a step aside, walker k's way on goes around everyone standing (not back into the same jam)."""
+    _mark_influence(w, np.flatnonzero(~moving), frame)
+    path, _ = _replan_around_standing(w, mesh, k, moving, radius)
+    _set_path(w, k, path)
+    w.best[k] = _remaining(w, np.array([k]))[0]
 
 
 def _make_room(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float) -> None:
@@ -478,7 +493,7 @@ def _replan_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarr
     """
     standing = np.flatnonzero(~moving)
     if len(standing):
-        carved = carve_discs(mesh, w.pos[standing], 2 * radius + OVERLAP_MARGIN_M)
+        carved = carve_discs(mesh, w.pos[standing], 2 * radius + REPLAN_CLEARANCE_M)
         res = carved.find_path(w.pos[k], w.goal[k], max_snap=MAX_SNAP_M, allow_partial=False)
         if res.status == "ok":
             return (res.points[1:] if len(res.points) > 1 else res.points), "too crowded"

@@ -200,7 +200,8 @@ def extend_routines(
 
     From where it stands, a pedestrian walks on to another reachable object (not the one it just came
     from) at a geodesic distance within [min_path, max_path], preferring objects related to the current
-    one and longer walks, and standing spots no other pedestrian uses; it dwells at each object
+    one and longer walks, at a standing spot no other pedestrian uses (the free one nearest to the side
+    facing it, :func:`_free_spot`); it dwells at each object
     (:func:`dwell_time`). The offline model's activity phrases name the later legs.
     """
     from song.datasets.run.intents import Leg
@@ -218,15 +219,18 @@ def extend_routines(
         clock = intent.depart_time + intent.geodesic_m / intent.speed
         previous, here = intent.start_object, np.asarray(intent.goal_xy)
         while len(legs) < cfg.max_legs and clock < cfg.scenario_s:
+            dwell = dwell_time(objects[legs[-1].goal_object], rng)
             dist = walk.geodesics_from(here[None])[0][0]
             options, weights, ends = [], [], []
             for oid, pts in snaps.items():
                 if oid in (legs[-1].goal_object, previous):
                     continue
-                end = _facing(pts, here)
+                end = _free_spot(pts, _facing(pts, here), taken, cfg.min_spawn_separation_m)
+                if end is None:  # every spot around it is someone's
+                    continue
                 length = walk.geodesic(dist, end)
-                free = all(np.linalg.norm(end - p) >= cfg.min_spawn_separation_m for p in taken)
-                if free and cfg.min_path_m <= length <= cfg.max_path_m:
+                fits = clock + dwell + length / intent.speed <= cfg.scenario_s  # the routine ends in the scenario
+                if fits and cfg.min_path_m <= length <= cfg.max_path_m:
                     options.append((oid, length))
                     ends.append(end)
                     weights.append((1.0 + 2.0 * relatedness(objects[legs[-1].goal_object], objects[oid])) * length)
@@ -234,9 +238,6 @@ def extend_routines(
                 break
             pick = int(rng.choice(len(options), p=np.asarray(weights) / np.sum(weights)))
             oid, length = options[pick]
-            dwell = dwell_time(objects[legs[-1].goal_object], rng)
-            if clock + dwell + length / intent.speed > cfg.scenario_s:
-                break  # the routine would run past the scenario
             legs[-1] = legs[-1].model_copy(update={"dwell_s": round(dwell, 3)})
             end = ends[pick]
             legs.append(
