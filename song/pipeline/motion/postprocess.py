@@ -170,7 +170,10 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
 
 
 def foot_offsets(joints: np.ndarray, rest: np.ndarray, contacts: np.ndarray, blend_frames: int) -> np.ndarray:
-    """Ankle translations ``(T, 2, 3)`` that lock planted feet, blend in/out and keep clearance."""
+    """Ankle translations ``(T, 2, 3)`` that lock planted feet, blend in/out and keep clearance.
+
+    Each contact run only touches its own window (the run and ``blend_frames`` either side).
+    """
     n = len(joints)
     offsets = np.zeros((n, 2, 3))
     frames = np.arange(n)
@@ -178,24 +181,26 @@ def foot_offsets(joints: np.ndarray, rest: np.ndarray, contacts: np.ndarray, ble
         gap = _sole_gap(joints, rest, ankle, toe)
         weight = np.zeros(n)
         for a, b in _runs(contacts[:, side]):
+            lo, hi = max(a - blend_frames, 0), min(b + blend_frames, n - 1) + 1
+            f = frames[lo:hi]
+            core = (f >= a) & (f <= b)
             lock = np.median(joints[a : b + 1, toe, :2], axis=0)
-            delta = np.zeros((n, 3))
-            delta[a : b + 1, :2] = lock - joints[a : b + 1, toe, :2]
-            delta[a : b + 1, 2] = -gap[a : b + 1]
-            w = np.zeros(n)
-            w[a : b + 1] = 1.0
+            delta = np.zeros((hi - lo, 3))
+            delta[core, :2] = lock - joints[a : b + 1, toe, :2]
+            delta[core, 2] = -gap[a : b + 1]
+            w = core.astype(np.float64)
             if blend_frames > 0:
-                before = (frames >= a - blend_frames) & (frames < a)
-                after = (frames > b) & (frames <= b + blend_frames)
-                x = np.where(before, (frames - (a - blend_frames - 1)) / (blend_frames + 1), 0.0)
-                x = np.where(after, ((b + blend_frames + 1) - frames) / (blend_frames + 1), x)
+                before, after = f < a, f > b
+                x = np.where(before, (f - (a - blend_frames - 1)) / (blend_frames + 1), 0.0)
+                x = np.where(after, ((b + blend_frames + 1) - f) / (blend_frames + 1), x)
                 ramp = x * x * (3 - 2 * x)
                 w = np.where(before | after, ramp, w)
-                delta[before] = delta[a]
-                delta[after] = delta[b]
-            take = w > weight
-            offsets[take, side] = w[take, None] * delta[take]
-            weight = np.maximum(weight, w)
+                delta[before] = delta[a - lo]
+                delta[after] = delta[b - lo]
+            take = w > weight[lo:hi]
+            window = offsets[lo:hi, side]  # a view: assigning through it fills offsets
+            window[take] = w[take, None] * delta[take]
+            weight[lo:hi] = np.maximum(weight[lo:hi], w)
         # clearance: never below the ground
         offsets[:, side, 2] = np.maximum(offsets[:, side, 2], -gap)
     return offsets

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 
 from song.config import DEFAULT_FPS
@@ -13,6 +14,18 @@ from song.errors import InputError
 from song.geometry.fk import forward_kinematics
 
 MAX_TURN_RATE = 4.0  # rad/s: a body turns at most this fast (≈ 180° in 0.8 s); plans may flip yaw in one frame
+
+
+@numba.njit(cache=True, nogil=True)
+def _rate_limited(values: np.ndarray, steps: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """The forward and the backward rate-limited passes, averaged (the Python loop cost ~9 ms a walk)."""
+    n = len(values)
+    forward, backward = values.copy(), values.copy()
+    for i in range(1, n):
+        forward[i] = forward[i - 1] + min(max(values[i] - forward[i - 1], -steps[i - 1]), steps[i - 1])
+    for i in range(n - 2, -1, -1):
+        backward[i] = backward[i + 1] + min(max(values[i] - backward[i + 1], -steps[i]), steps[i])
+    return 0.5 * (forward + backward)
 
 
 def body_heading(yaw: np.ndarray, t: np.ndarray, max_rate: float = MAX_TURN_RATE) -> np.ndarray:
@@ -24,15 +37,8 @@ def body_heading(yaw: np.ndarray, t: np.ndarray, max_rate: float = MAX_TURN_RATE
     target = np.unwrap(np.asarray(yaw, dtype=np.float64))
     if len(target) < 2:
         return target
-    steps = (max_rate * np.diff(np.asarray(t, dtype=np.float64))).tolist()
-    values = target.tolist()
-    forward = values[:]
-    for i in range(1, len(values)):
-        forward[i] = forward[i - 1] + min(max(values[i] - forward[i - 1], -steps[i - 1]), steps[i - 1])
-    backward = values[:]
-    for i in range(len(values) - 2, -1, -1):
-        backward[i] = backward[i + 1] + min(max(values[i] - backward[i + 1], -steps[i]), steps[i])
-    return 0.5 * (np.asarray(forward) + np.asarray(backward))
+    steps = max_rate * np.diff(np.asarray(t, dtype=np.float64))
+    return _rate_limited(np.ascontiguousarray(target), np.ascontiguousarray(steps))
 
 
 @dataclass(frozen=True)
