@@ -96,8 +96,25 @@ def quat_rotate(q: Any, v: Any) -> Any:
     return v + 2.0 * (w * cross + cross2)
 
 
+COMPILED_MIN = 256  # from this many rotations a float64 numpy batch goes through the compiled kernels
+
+
+def _compiled(array: Any, item_shape: tuple[int, ...]) -> bool:
+    """Whether ``array`` is a numpy float64 batch big enough for :mod:`song.geometry._rotations_kernel`."""
+    return (
+        isinstance(array, np.ndarray)
+        and array.dtype == np.float64
+        and array.shape[len(array.shape) - len(item_shape) :] == item_shape
+        and array.size >= COMPILED_MIN * int(np.prod(item_shape))
+    )
+
+
 def quat_to_matrix(q: Any) -> Any:
     """Rotation matrices ``(..., 3, 3)`` of unit quaternions ``(..., 4)``. numpy or torch."""
+    if _compiled(q, (4,)):
+        from song.geometry._rotations_kernel import quat_to_matrix_kernel
+
+        return quat_to_matrix_kernel(np.ascontiguousarray(q).reshape(-1, 4)).reshape(*q.shape[:-1], 3, 3)
     xp = _xp(q)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     rows = [
@@ -115,6 +132,10 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     matrix, the one with the largest (hence best-conditioned) component is kept.
     """
     m = np.asarray(m)
+    if _compiled(m, (3, 3)):
+        from song.geometry._rotations_kernel import matrix_to_quat_kernel
+
+        return matrix_to_quat_kernel(np.ascontiguousarray(m).reshape(-1, 3, 3)).reshape(*m.shape[:-2], 4)
     m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
     m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
     m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]

@@ -126,3 +126,19 @@ def test_property_composition_is_associative_and_orthonormal(values):
     m = r.quat_to_matrix(left)
     assert np.allclose(m @ m.T, np.eye(3), atol=1e-12)
     assert np.isclose(np.linalg.det(m), 1.0)
+
+
+def test_compiled_conversions_equal_the_numpy_twins(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Large float64 batches go through numba kernels: same answers as the numpy forms (their twins)."""
+    import song.geometry.rotations as rotations
+
+    rng = np.random.default_rng(11)
+    q = rng.normal(size=(300, 24, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q[0, :4] = [[0, 1, 0, 0], [0, 0, 0, 1], [-1, 0, 0, 0], [0, 0, -1, 0]]  # each Shepperd branch, w < 0
+    monkeypatch.setattr(rotations, "COMPILED_MIN", 10**12)
+    twin_m = rotations.quat_to_matrix(q)
+    twin_q = rotations.matrix_to_quat(twin_m)
+    monkeypatch.setattr(rotations, "COMPILED_MIN", 256)
+    np.testing.assert_allclose(rotations.quat_to_matrix(q), twin_m, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(rotations.matrix_to_quat(twin_m), twin_q, rtol=0, atol=1e-15)
