@@ -17,7 +17,7 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    way of the walkers around it (to a free spot 0.7 or 1.4 m away, the one farthest from their ways),
    waits there ``YIELD_S`` and walks on; after ``MAX_YIELDS`` yields a further stall removes it, its
    reason recorded. (Stepping aside instead of standing still where it stalled: 3 against 3 through a
-   1.0 m door all arrive, 5 of 6 before; in a 264 m² lobby 31 of 32 arrive, 26 before.)
+   1.0 m door all arrive, 5 of 6 before; in the generated lobby 30-32 of 32 arrive, 26 before.)
 
 A removal does not re-simulate the crowd from t = 0: the run drops the pedestrian and goes on, then
 rolls back once to before the first frame in which any dropped pedestrian could have changed someone
