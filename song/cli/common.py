@@ -85,14 +85,21 @@ def status_table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> 
     return table
 
 
-def bench_location(positional: str | None, option: str | None) -> str:
-    """The benchmark a command was given, as ``--bench DIR`` (or, as before, a bare first argument)."""
-    if positional and option and positional != option:
-        raise typer.BadParameter(f"two benchmarks given ('{positional}' and --bench '{option}'): give one")
+def one_location(positional: Any, option: Any, flag: str, noun: str, what: str) -> Any:
+    """The folder a command was given as ``flag DIR`` or, as ``song viz`` took it before, a bare first argument."""
+    if positional and option and str(positional) != str(option):
+        raise typer.BadParameter(f"two {noun} given ('{positional}' and {flag} '{option}'): give one")
     value = option or positional
     if not value:
-        raise typer.BadParameter("missing --bench DIR (a benchmark folder, DIR@X.Y.Z, or a release folder)")
+        raise typer.BadParameter(f"missing {flag} DIR ({what})")
     return value
+
+
+def bench_location(positional: str | None, option: str | None) -> str:
+    """The benchmark a command was given, as ``--bench DIR`` (or, as before, a bare first argument)."""
+    return one_location(
+        positional, option, "--bench", "benchmarks", "a benchmark folder, DIR@X.Y.Z, or a release folder"
+    )
 
 
 def eval_results(path: Path, suffix: str) -> Path:

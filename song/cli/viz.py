@@ -7,7 +7,15 @@ from pathlib import Path
 import typer
 
 from song.cli import app
-from song.cli.common import BenchArgument, BenchOption, bench_location, console, eval_results, handle_errors
+from song.cli.common import (
+    BenchArgument,
+    BenchOption,
+    bench_location,
+    console,
+    eval_results,
+    handle_errors,
+    one_location,
+)
 
 RESULTS_HELP = "a policy's output from song eval: NAME.json, NAME.parquet or NAME in its --out folder"
 
@@ -67,11 +75,11 @@ def crowd(
     """All pedestrian trajectories over the map (PNG) and an animation (MP4)."""
     from song.viz.crowd import render_crowd
 
-    if positional and run and positional != run:
-        raise typer.BadParameter(f"two runs given ('{positional}' and --run '{run}'): give one")
-    if not (run or positional):
-        raise typer.BadParameter("missing --run DIR (a run folder made by song synth)")
-    _report(render_crowd(run or positional, scene, out, video))
+    _report(
+        render_crowd(
+            one_location(positional, run, "--run", "runs", "a run folder made by song synth"), scene, out, video
+        )
+    )
 
 
 @viz_app.command("episode")

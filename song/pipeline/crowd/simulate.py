@@ -135,6 +135,13 @@ def _select(w: _Walkers, keep: np.ndarray) -> _Walkers:
     return _Walkers(**values)
 
 
+def _to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(M,) distance from each point (M, 2) to the nearest of the segments a→b (S, 2), m."""
+    ab = b - a
+    s = np.clip(((points[:, None] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    return _length(points[:, None] - (a + s[..., None] * ab)).min(axis=1)
+
+
 def _suffix(path: np.ndarray) -> np.ndarray:
     steps = _length(np.diff(path, axis=0))
     return np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
@@ -280,10 +287,7 @@ def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: 
         (w.cur[j], w.nxt[j]) for j in others if moving[j] and w.has_next[j]
     ]
     if ways:
-        a, b = np.array([p for p, _ in ways]), np.array([q for _, q in ways])
-        ab = b - a
-        u = np.clip(((spots[:, None] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-        score = _length(spots[:, None] - (a + u[..., None] * ab)).min(axis=1)
+        score = _to_segments(spots, np.array([p for p, _ in ways]), np.array([q for _, q in ways]))
     else:
         score = -_length(spots - w.pos[k])
     spot = spots[int(np.argmax(score))]
@@ -401,7 +405,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
             w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
             w.arrival[k] = t
         elif aside:
-            _resume_around_standing(w, mesh, int(k), moving, radius, frame)
+            _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
     idx = np.flatnonzero(moving & ~done)
     if not len(idx):
         return {}
@@ -412,7 +416,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
     for k in idx[~better & (t - w.last_progress[idx] > stall_s)]:
         if w.stops[k][w.leg[k]][2]:  # the crowd keeps it from its spot aside: it waits where it got to
             _next_leg(w, mesh, int(k), t)
-            _resume_around_standing(w, mesh, int(k), moving, radius, frame)
+            _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
             continue
         if w.replanned[k] and w.yields[k] < MAX_YIELDS:
             # deadlocked face to face: step out of the others' way for a while, then try again
@@ -426,22 +430,23 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
             failed[int(k)] = f"stalled for {stall_s:g} s after replanning ({w.replanned[k]})"
             continue
         w.last_progress[k] = t
-        _mark_influence(w, np.flatnonzero(~moving), frame)  # everyone standing shapes the new path
-        path, w.replanned[k] = _replan_around_standing(w, mesh, k, moving, radius)
-        _set_path(w, k, path)
-        w.best[k] = _remaining(w, np.array([k]))[0]
+        w.replanned[k] = _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
         if w.replanned[k].startswith("the way is blocked"):
             _mark_influence(w, [k], frame)  # it sends people standing in its way off
             _make_room(w, mesh, k, moving, radius, t)
     return failed
 
 
-def _resume_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, frame: int):
-    """After a step aside, walker k's way on goes around everyone standing (not back into the same jam)."""
-    _mark_influence(w, np.flatnonzero(~moving), frame)
-    path, _ = _replan_around_standing(w, mesh, k, moving, radius)
+def _reroute_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, frame: int):
+    """Walker k takes a path around everyone standing (a stall replan; the way on after a step aside).
+
+    Returns why a later stall would be final (:func:`_replan_around_standing`).
+    """
+    _mark_influence(w, np.flatnonzero(~moving), frame)  # everyone standing shapes the new path
+    path, reason = _replan_around_standing(w, mesh, k, moving, radius)
     _set_path(w, k, path)
     w.best[k] = _remaining(w, np.array([k]))[0]
+    return reason
 
 
 def _make_room(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float) -> None:
@@ -452,14 +457,9 @@ def _make_room(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: f
     ``ASIDE_DIRECTIONS`` at ``ASIDE_M`` around it on the mesh, farthest from k's path, and stands there.
     """
     path = np.vstack([w.pos[k], w.paths[k][w.corner[k] :]])
-    a, b = path[:-1], path[1:]
 
     def clearance(points: np.ndarray) -> np.ndarray:
-        if not len(a):
-            return _length(points - w.pos[k])
-        ab = b - a
-        s = np.clip(((points[:, None] - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-        return _length(points[:, None] - (a + s[..., None] * ab)).min(axis=1)
+        return _to_segments(points, path[:-1], path[1:]) if len(path) > 1 else _length(points - w.pos[k])
 
     standing = np.flatnonzero(~moving)
     if not len(standing):
@@ -540,8 +540,8 @@ class _Run:
     def _record(self, frame: int) -> None:
         w = self.w
         w.smooth = (1 - HEADING_SMOOTHING) * w.smooth + HEADING_SMOOTHING * w.vel
-        moving = _length(w.smooth) > STAND_SPEED
-        w.heading = np.where(moving, np.arctan2(w.smooth[:, 1], w.smooth[:, 0]), w.heading)
+        fast = _length(w.smooth) > STAND_SPEED
+        w.heading = np.where(fast, np.arctan2(w.smooth[:, 1], w.smooth[:, 0]), w.heading)
         self.xy[:, frame], self.yaw[:, frame], self.speed[:, frame] = w.pos, w.heading, _length(w.vel)
         self.frame = frame
         if frame % SNAPSHOT_EVERY == 0:
