@@ -98,7 +98,9 @@ class MotionConfig(_Section):
         "A person is casually walking forward at a natural pace with minimal waist sway",
         description="Kimodo text prompt (paper appendix)",
     )
-    walk_ratio_m_s: float = Field(0.38, ge=0.3, le=0.45, description="walk ratio WR = L/f, m·s")
+    walk_ratio_m_s: float = Field(
+        0.38, ge=0.3, le=0.45, description="walk ratio WR = L/f, m·s, of a person of the mean height (1.71 m)"
+    )
     min_cadence_spm: float = Field(85.0, gt=0.0, description="lowest cadence, steps/min")
     height_min_m: float = Field(1.50, ge=1.0, description="smallest body height, m")
     height_max_m: float = Field(1.95, le=2.3, description="largest body height, m")

@@ -15,8 +15,9 @@ How it works (DESIGN §5.3; issue #5):
    mid-stance time (read from the *planned* trajectory, so deceleration and stops are anticipated),
    with the style's step width and toe-out. Stance feet never move (zero skating by construction);
    they roll over the heel after touchdown and over the ball before lift-off.
-4. **Swing.** The ankle lifts first, then travels with a minimum-jerk profile, then lands; the foot
-   pitches from toe-down to toe-up.
+4. **Swing.** The foot leaves the floor heel-high and travels forward at once (a minimum-jerk profile cut
+   before its end, so it still moves at touchdown); its height peaks early in the swing and falls while
+   it reaches forward; it pitches from toe-down to toe-up.
 5. **Body.** The pelvis follows the plan with a small lateral sway and a vertical bob, lowered where
    needed so both ankles stay reachable; pelvic rotation and list, counter-rotating thorax, lean
    into turns (``atan(v·ω/g)``), counter-phase arm swing with forward-only elbow flexion, a
@@ -33,7 +34,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d
 
 from song.config import MotionConfig
 from song.geometry.fk import global_to_local
@@ -43,9 +44,22 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import rest_joints
 from song.pipeline.motion.types import Motion, Trajectory, body_heading
 
-# Walk ratio (step length / step frequency) is constant per person across speeds and varies between
-# adults by about ±10 % around 0.38 m·s (Sekiya & Nagasaki 1998, Gait Posture 7:225; 0.34-0.42 m·s).
-WALK_RATIO_SPREAD = (0.9, 1.1)
+# Walk ratio (step length / step frequency) is constant per person across speeds, 0.34-0.42 m·s in adults
+# around 0.38, and grows with body height (Sekiya & Nagasaki 1998, Gait Posture 7:225): the configured walk
+# ratio is that of a person of the mean height, scaled by height and by ±7 % per person. A short person
+# taking a tall person's steps walks with an over-extended hip.
+MEAN_HEIGHT_M, HEIGHT_SD_M = 1.71, 0.09
+WALK_RATIO_SPREAD = (0.93, 1.07)
+# The pelvis is lowered exactly as far as the leg reaches need where they bind, and elsewhere no faster
+# than PELVIS_DROP_STEP_M per frame (a Gaussian-smoothed cap reached over from the neighbouring frames,
+# so the knee was bent 12-17° at heel strike at 1.4 m/s); then by a loading-response dip: the knee yields
+# 15-20° after heel strike (peak at 12-15 % of the cycle) and straightens by mid-stance (Perry &
+# Burnfield 2010); at the skeleton's shank and thigh that is ~1 cm.
+# per frame at 30 FPS (1.2 m/s); slower limits hold the pelvis low for longer around each double support
+# (0.02 m: hip range 57° at 1.4 m/s instead of 49°)
+PELVIS_DROP_STEP_M = 0.04
+LOADING_DIP_M = 0.01
+LOADING_WINDOW = (0.8, 1.1, 1.5)  # foot phase: heel strike, deepest, straight again (stance is 0.8-2.0)
 LEG_REACH = 0.999  # the pelvis is lowered so that no ankle target lies beyond this share of the leg
 SWING = 0.8  # swing length in step units (40 % of a 2-step stride)
 REST_PHASE = 0.9  # the phase rests in the middle of a double support (s mod 1 = 0.9)
@@ -54,21 +68,39 @@ _TURN_RATE = 0.35  # rad/s: above this a standing pedestrian steps round (turnin
 _SETTLE_POS = 0.06  # m: a planted foot farther than this from its neutral spot triggers a step
 _SETTLE_YAW = 0.3  # rad: same for foot yaw
 _GRAVITY = 9.81
-# The foot lands under the hip 0.48 steps after touchdown (40 % into its 1.2-step stance), not at
+# The foot lands under the hip 0.55 steps after touchdown (~46 % into its 1.2-step stance), not at
 # mid-stance: heel-off at the end of stance lifts the ankle, so the leg reaches farther behind than ahead.
 _PLACE_AT = 0.55
-_TOE_OFF_DEG = 40.0  # foot pitch at lift-off (heel raised, rolling over the ball)
+# Foot pitch at lift-off: the heel is raised ~60° as the toe leaves the floor (foot-floor angle at toe-off
+# ~55-65° in walking at 1.2-1.6 m/s: Winter 1991, foot segment angle). A high heel lifts and advances the
+# trailing ankle, so the leg reaches behind with the knee bent instead of the hip over-extended.
+_TOE_OFF_DEG = 60.0
 # The heel rises over the last quarter of stance (terminal stance, ~45-60 % of the cycle: Perry & Burnfield
 # 2010); rising earlier bends the trailing knee while the pelvis is low at the opposite heel strike.
 HEEL_RISE_FROM = 0.75
 _HEEL_STRIKE_DEG = 10.0  # foot pitch at touchdown (toes up)
-# Foot lift over the swing (fractions of the swing): it rises fast after toe-off and comes down over the
-# second half, so the knee flexes most in initial swing and extends while the foot reaches forward
-# (peak knee flexion at ~70-75 % of the cycle, hip flexion ~30° at terminal swing: Perry & Burnfield 2010).
-SWING_LIFT_RISE, SWING_LIFT_FALL = 0.2, 0.3
+# Swing (fractions of the swing). The ankle's height rises fast after toe-off (peak knee flexion in initial
+# swing, ~60° at 70-75 % of the cycle) and then comes down over the rest of the swing while the foot reaches
+# forward, so the knee extends on the way to heel strike instead of the thigh lifting a high foot far ahead
+# (hip flexion ~30-35° at terminal swing; Perry & Burnfield 2010; ankle height falls through mid- and
+# terminal swing: Winter 1992, Phys. Ther. 72:45). Lift = clip(a + b·stride, a, max) metres at 1.75 m height.
+# The lift bump rises over the first 20 % and falls over the last 65 % when walking; short steps while
+# standing or turning on the spot keep it up to 70 % (they travel late and low, and the toe must clear).
+SWING_LIFT_RISE, SWING_LIFT_FALL = 0.2, (0.65, 0.3)  # rise; fall (walking, standing)
+SWING_DESCENT = 0.6  # the ankle goes from its toe-off height to its heel-strike height over the first 60 %
+SWING_LIFT = (0.06, 0.05, 0.10)  # a, b, max
+SWING_PITCH = (0.05, 0.6)  # the foot turns from toe-down (toe-off) to toe-up (heel strike) over this window
+# Forward travel: a minimum-jerk profile over the whole swing, starting at toe-off (it used to wait 6 % of
+# the swing, so the foot trailed the body and the hip over-extended). Cut before its end (the foot still
+# moving at touchdown) it lowered the hip range at 1.4 m/s by 5° more but bent the knee at heel strike and
+# the toe skimmed the floor (measured: benchmarks/motion.py --normative).
+SWING_TRAVEL = (0.0, 1.0)
+# Shoulder swing amplitude a + b·v degrees (scaled per person by 0.75-1.25): ±10-25° at 1.0-1.4 m/s, growing
+# with speed (Murray et al. 1967, J. Bone Joint Surg. 49A:336; Collins et al. 2009, Proc. R. Soc. B 276:3679).
+ARM_SWING_DEG = (6.0, 10.0)
 # Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
 # trunk and the pelvis (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999, Exp. Brain Res. 129:629).
-HEAD_LEAD_S, TRUNK_LEAD_S, PELVIS_LEAD_S = 0.25, 0.1, 0.05
+HEAD_LEAD_S, TRUNK_LEAD_S, PELVIS_LEAD_S = 0.25, 0.2, 0.15
 
 
 @dataclass(frozen=True)
@@ -96,12 +128,13 @@ class GaitStyle:
 def sample_style(
     rng: np.random.Generator, height_range: tuple[float, float] = (1.5, 1.95), walk_ratio: float = 0.38
 ) -> GaitStyle:
-    """Draw a style. Heights: normal(1.71 m, 0.09 m) clipped to ``height_range``; WR within ±10 %."""
+    """Draw a style. Heights: normal(1.71 m, 0.09 m) clipped to ``height_range``; WR ∝ height, ±7 %."""
     lo, hi = height_range
+    height = float(np.clip(rng.normal(MEAN_HEIGHT_M, HEIGHT_SD_M), lo, hi))
     return GaitStyle(
-        height_m=float(np.clip(rng.normal(1.71, 0.09), lo, hi)),
-        walk_ratio=float(walk_ratio * rng.uniform(*WALK_RATIO_SPREAD)),
-        arm_swing=float(rng.uniform(0.7, 1.3)),
+        height_m=height,
+        walk_ratio=float(walk_ratio * height / MEAN_HEIGHT_M * rng.uniform(*WALK_RATIO_SPREAD)),
+        arm_swing=float(rng.uniform(0.75, 1.25)),
         elbow_flex_deg=float(rng.uniform(8.0, 20.0)),
         lean_deg=float(rng.uniform(1.0, 5.0)),
         step_width=float(rng.uniform(0.75, 1.05)),
@@ -310,14 +343,17 @@ def _foot_poses(
     sigma = np.clip(u / SWING, 0.0, 1.0)
     start = pose(prev[:, :2], prev[:, 2], beta_off, "toe")
     end = pose(cur[:, :2], cur[:, 2], -beta_on, "heel")
-    progress = _min_jerk((sigma - 0.06) / 0.88)
+    a, b = SWING_TRAVEL
+    progress = _min_jerk((sigma - a) / (b - a)) / _min_jerk(np.array((1.0 - a) / (b - a)))
     distance = np.linalg.norm(end[:, :2] - start[:, :2], axis=1)
-    lift = np.clip(0.05 + 0.05 * distance, 0.05, 0.09) * h_scale
-    bump = _smoothstep(sigma / SWING_LIFT_RISE) * _smoothstep((1.0 - sigma) / SWING_LIFT_FALL)
+    lift = np.clip(SWING_LIFT[0] + SWING_LIFT[1] * distance, SWING_LIFT[0], SWING_LIFT[2]) * h_scale
+    fall = SWING_LIFT_FALL[1] + (SWING_LIFT_FALL[0] - SWING_LIFT_FALL[1]) * walk
+    bump = _smoothstep(sigma / SWING_LIFT_RISE) * _smoothstep((1.0 - sigma) / fall)
     swing_pos = start + (end - start) * progress[:, None]
-    swing_pos[:, 2] = start[:, 2] + (end[:, 2] - start[:, 2]) * sigma + lift * bump
+    swing_pos[:, 2] = start[:, 2] + (end[:, 2] - start[:, 2]) * _smoothstep(sigma / SWING_DESCENT) + lift * bump
     swing_yaw = prev[:, 2] + wrap_angle(cur[:, 2] - prev[:, 2]) * progress
-    swing_pitch = beta_off + (-beta_on - beta_off) * _smoothstep(sigma)
+    turn = _smoothstep((sigma - SWING_PITCH[0]) / (SWING_PITCH[1] - SWING_PITCH[0]))
+    swing_pitch = beta_off + (-beta_on - beta_off) * turn
     ankle = np.where(in_swing[:, None], swing_pos, stance_pos)
     yaw = np.where(in_swing, swing_yaw, cur[:, 2])
     pitch = np.where(in_swing, swing_pitch, stance_pitch)
@@ -338,21 +374,34 @@ def _slerp_matrix(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
 def _lowered_pelvis(
     z_nominal: np.ndarray, hips: list[np.ndarray], ankles: list[np.ndarray], pelvis_z: np.ndarray, reach: np.ndarray
 ) -> np.ndarray:
-    """Pelvis heights ≤ nominal that keep both ankle targets within ``reach`` of their hips, smoothed.
+    """Pelvis heights ≤ nominal that keep both ankle targets within ``reach`` of their hips, slope-limited.
 
-    The cap is eroded (minimum filter) before a Gaussian of the same radius, so the smoothed curve
-    stays below the cap at every frame.
+    Equal to the cap where it binds; elsewhere the highest curve below it that moves at most
+    ``PELVIS_DROP_STEP_M`` per frame (so the pelvis starts down early enough instead of dropping in
+    one frame).
     """
     cap = z_nominal.copy()
     for hip, ankle in zip(hips, ankles, strict=True):
         horizontal = np.linalg.norm(ankle[:, :2] - hip[:, :2], axis=1)
         vertical = np.sqrt(np.maximum(reach * reach - horizontal * horizontal, (0.5 * reach) ** 2))
         cap = np.minimum(cap, ankle[:, 2] + vertical - (hip[:, 2] - pelvis_z))
-    radius = 1
     if len(cap) > 1:
-        cap = minimum_filter1d(cap, 2 * radius + 1, mode="nearest")
-        cap = gaussian_filter1d(cap, radius / 2.0, mode="nearest", truncate=2.0)
+        # the highest curve under the cap whose height changes by at most PELVIS_DROP_STEP_M per frame: a
+        # cone erosion, min_j (cap_j + step·|i − j|), as two running minima
+        ramp = np.arange(len(cap)) * PELVIS_DROP_STEP_M
+        ahead = ramp + np.minimum.accumulate(cap - ramp)
+        behind = np.minimum.accumulate((cap + ramp)[::-1])[::-1] - ramp
+        cap = np.minimum(ahead, behind)
     return cap
+
+
+def _loading_dip(phase_foot: np.ndarray) -> np.ndarray:
+    """Pelvis lowering (m, at 1.75 m height) while one foot takes the body's weight after heel strike."""
+    u = np.mod(phase_foot, 2.0)
+    a, peak, b = LOADING_WINDOW
+    rise = _smoothstep((u - a) / (peak - a))
+    fall = _smoothstep((b - u) / (b - peak))
+    return LOADING_DIP_M * np.where(u < peak, rise, fall) * ((u >= a) & (u <= b))
 
 
 def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 85.0) -> Motion:
@@ -404,6 +453,7 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     pelvis[:, 2] = z_nominal
     hips = [pelvis + off for off in hip_offsets]
     pelvis[:, 2] = _lowered_pelvis(z_nominal, hips, ankles, z_nominal, body.leg * LEG_REACH)
+    pelvis[:, 2] -= walk * h_scale * (_loading_dip(phase) + _loading_dip(phase - 1.0))
     hips = [pelvis + off for off in hip_offsets]
 
     glob = np.broadcast_to(np.eye(3), (n, 24, 3, 3)).copy()
@@ -443,7 +493,7 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)
     glob[:, J["left_collar"]] = rot_chest
     glob[:, J["right_collar"]] = rot_chest
-    amplitude = np.radians(style.arm_swing * (4.0 + 10.0 * np.clip(speed, 0.0, 1.5)))
+    amplitude = np.radians(style.arm_swing * (ARM_SWING_DEG[0] + ARM_SWING_DEG[1] * np.clip(speed, 0.0, 1.5)))
     swing_left = walk * amplitude * np.cos(np.pi * (phase - 1.8))
     hang = np.radians(82.0)
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):

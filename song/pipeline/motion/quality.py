@@ -12,6 +12,8 @@ Definitions:
 - **Cadence**: steps/s measured from consecutive touchdowns of the same foot (``2 / period``),
   compared with the walk-ratio model at the planned mean speed over that stride; only strides where
   the plan walks steadily (speed > 0.3 m/s throughout) count.
+- **Feet clash**: the two feet's centre lines (ankle → ball) closer than 4 cm in a frame: the soles
+  overlap by more than half, one foot passes through the other (:func:`feet_gap`).
 - **Joint limits**: knee flexion is the angle of the knee's local rotation about the body's lateral
   axis (+y), positive when the shin folds backwards; elbow flexion is about −z (left) / +z (right),
   positive when the forearm folds forwards. Hyper-extension is a negative angle.
@@ -54,6 +56,23 @@ def sole_gaps(joints: np.ndarray, rest_joints: np.ndarray) -> np.ndarray:
     for ankle, toe in zip(ANKLES, TOES, strict=True):
         gaps.append(np.minimum(joints[:, ankle, 2] - rest_joints[ankle, 2], joints[:, toe, 2] - rest_joints[toe, 2]))
     return np.stack(gaps, axis=-1)
+
+
+FEET_CLASH_M = 0.04  # foot centre lines closer than this: the soles (~9 cm wide) overlap by more than half
+
+
+def feet_gap(joints: np.ndarray, samples: int = 5) -> np.ndarray:
+    """Per-frame distance ``(T,)`` m between the two feet's centre lines (ankle → ball of foot).
+
+    Each segment is sampled at ``samples`` evenly spaced points; the gap is the smallest distance
+    between a left and a right point (exact to ~1 cm at a foot length of 15 cm).
+    """
+    w = np.linspace(0.0, 1.0, samples)[None, :, None]
+    feet = []
+    for ankle, toe in zip(ANKLES, TOES, strict=True):
+        feet.append(joints[:, None, ankle] + w * (joints[:, None, toe] - joints[:, None, ankle]))
+    d = np.linalg.norm(feet[0][:, :, None] - feet[1][:, None, :], axis=-1)
+    return d.min(axis=(1, 2))
 
 
 def knee_elbow_flexion(local_quats: np.ndarray) -> dict[str, np.ndarray]:
@@ -114,6 +133,7 @@ def motion_quality(
     root_error = np.linalg.norm(joints[:, 0, :2] - plan_xy, axis=1)
     cadence = cadence_errors(contacts, t, plan_speed, walk_ratio, min_cadence_spm)
     flex = knee_elbow_flexion(local_quats)
+    gap = feet_gap(joints)
 
     def r(x: float, digits: int = 5) -> float:
         return round(float(x), digits)
@@ -131,6 +151,8 @@ def motion_quality(
         "cadence_strides": int(cadence.size),
         "cadence_error_median": r(np.median(np.abs(cadence)) if cadence.size else 0.0, 4),
         "cadence_error_max": r(np.abs(cadence).max() if cadence.size else 0.0, 4),
+        "feet_gap_min_m": r(gap.min(), 4),
+        "feet_clash_frames": int((gap < FEET_CLASH_M).sum()),
         "knee_flexion_min_deg": r(np.degrees(flex["knee"].min()), 3),
         "knee_flexion_max_deg": r(np.degrees(flex["knee"].max()), 3),
         "elbow_flexion_min_deg": r(np.degrees(flex["elbow"].min()), 3),
@@ -142,27 +164,64 @@ def motion_quality(
 # knee flexion ~0-5° at heel strike, a 10-25° loading-response wave, 55-68° peak in swing, hip sagittal
 # range 35-50° (Perry & Burnfield, Gait Analysis, 2nd ed. 2010, ch. 7-8; Winter, Biomechanics and Motor
 # Control of Human Gait, 1991); walk ratio 0.34-0.44 m·s across 0.5-1.6 m/s (Sekiya & Nagasaki 1998,
-# Gait Posture 7:225); cadence 100-120 steps/min at 1.3 m/s (Grieve & Gear 1966; Oberg et al. 1993).
+# Gait Posture 7:225); cadence 100-120 steps/min at 1.3 m/s (Grieve & Gear 1966; Oberg et al. 1993);
+# transverse pelvic rotation ±3-6° (Perry & Burnfield 2010, ch. 9; Bruijn et al. 2008, Gait Posture 28:93);
+# shoulder (upper-arm) sagittal swing ±10-25°, opposite to the hip of the same side (Murray et al. 1967,
+# J. Bone Joint Surg. 49A:336; Collins et al. 2009, Proc. R. Soc. B 276:3679).
 NORMATIVE = {
     "knee_heel_strike_deg": (0.0, 8.0),
     "knee_loading_peak_deg": (10.0, 25.0),
     "knee_swing_peak_deg": (55.0, 68.0),
     "hip_range_deg": (35.0, 50.0),
     "walk_ratio_m_s": (0.34, 0.44),
+    "pelvic_rotation_deg": (3.0, 6.0),
+    "shoulder_swing_deg": (10.0, 25.0),
 }
 CADENCE_AT_1_3_SPM = (100.0, 120.0)
 LOADING_WINDOW = 0.15  # loading response: the first 15 % of the gait cycle after heel strike
 STEADY_MPS = 0.3  # strides whose planned speed stays above this count
 
 
-def gait_cycle_figures(local_quats: np.ndarray, contacts: np.ndarray, t: np.ndarray, speed: np.ndarray) -> dict:
-    """Sagittal joint figures per steady stride, as medians over the strides (degrees, m·s, steps/min).
+def _pelvis_yaw(local_quats: np.ndarray) -> np.ndarray:
+    """Unwrapped yaw (degrees) of the pelvis's forward axis (the root's local rotation is global)."""
+    w, x, y, z = np.moveaxis(local_quats[:, 0], -1, 0)
+    fwd_x, fwd_y = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z)
+    return np.degrees(np.unwrap(np.arctan2(fwd_y, fwd_x)))
+
+
+def upper_arm_swing(joints: np.ndarray, local_quats: np.ndarray, side: str) -> np.ndarray:
+    """Sagittal angle (degrees, ``(T,)``) of one upper arm, positive forward of the trunk's vertical.
+
+    The shoulder→elbow direction projected on the pelvis's forward axis and the vertical.
+    """
+    d = joints[:, J[f"{side}_elbow"]] - joints[:, J[f"{side}_shoulder"]]
+    yaw = np.radians(_pelvis_yaw(local_quats))
+    forward = d[:, 0] * np.cos(yaw) + d[:, 1] * np.sin(yaw)
+    return np.degrees(np.arctan2(forward, -d[:, 2]))
+
+
+def _detrended_half_range(x: np.ndarray) -> float:
+    """Half the peak-to-peak range of ``x`` after removing its straight line (a turn's drift)."""
+    trend = np.linspace(x[0], x[-1], len(x))
+    y = x - trend
+    return 0.5 * float(y.max() - y.min())
+
+
+def gait_cycle_figures(
+    local_quats: np.ndarray, contacts: np.ndarray, t: np.ndarray, speed: np.ndarray, joints: np.ndarray | None = None
+) -> dict:
+    """Joint figures per steady stride, as medians over the strides (degrees, m·s, steps/min).
 
     A stride runs from one touchdown (contact onset) of a foot to its next; knee flexion is the
-    knee's local rotation about +y, hip flexion minus the hip's (the thigh swinging forward). Returns
-    ``{}`` when no stride is steady.
+    knee's local rotation about +y, hip flexion minus the hip's (the thigh swinging forward); pelvic
+    rotation is half the range of the pelvis's yaw over the stride (its drift removed). With world
+    ``joints`` also the shoulder swing (half the range of the same side's :func:`upper_arm_swing`)
+    and its correlation with that side's hip flexion (−1 is anti-phase). Returns ``{}`` when no
+    stride is steady.
     """
     aa = np.degrees(quat_to_axis_angle(local_quats))
+    pelvis_yaw = _pelvis_yaw(local_quats)
+    arms = None if joints is None else [upper_arm_swing(joints, local_quats, side) for side in ("left", "right")]
     rows = []
     for foot, (hip, knee) in enumerate(((J["left_hip"], J["left_knee"]), (J["right_hip"], J["right_knee"]))):
         c = contacts[:, foot]
@@ -175,17 +234,21 @@ def gait_cycle_figures(local_quats: np.ndarray, contacts: np.ndarray, t: np.ndar
             hip_flex = -aa[a : b + 1, hip, 1]
             load = flex[: max(2, int(round(LOADING_WINDOW * (b - a))) + 1)]
             cadence = 2.0 / (t[b] - t[a])  # steps/s
-            rows.append(
-                {
-                    "speed_mps": float(v.mean()),
-                    "knee_heel_strike_deg": float(flex[0]),
-                    "knee_loading_peak_deg": float(load.max()),
-                    "knee_swing_peak_deg": float(flex.max()),
-                    "hip_range_deg": float(hip_flex.max() - hip_flex.min()),
-                    "walk_ratio_m_s": float(v.mean() / cadence**2),
-                    "cadence_spm": float(60.0 * cadence),
-                }
-            )
+            row = {
+                "speed_mps": float(v.mean()),
+                "knee_heel_strike_deg": float(flex[0]),
+                "knee_loading_peak_deg": float(load.max()),
+                "knee_swing_peak_deg": float(flex.max()),
+                "hip_range_deg": float(hip_flex.max() - hip_flex.min()),
+                "pelvic_rotation_deg": _detrended_half_range(pelvis_yaw[a : b + 1]),
+                "walk_ratio_m_s": float(v.mean() / cadence**2),
+                "cadence_spm": float(60.0 * cadence),
+            }
+            if arms is not None:
+                arm = arms[foot][a : b + 1]
+                row["shoulder_swing_deg"] = _detrended_half_range(arm)
+                row["arm_hip_correlation"] = float(np.corrcoef(arm, hip_flex)[0, 1])
+            rows.append(row)
     if not rows:
         return {}
     return {key: round(float(np.median([r[key] for r in rows])), 4) for key in rows[0]} | {"strides": len(rows)}

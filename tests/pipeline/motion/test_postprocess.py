@@ -44,11 +44,11 @@ def test_align_removes_drift_but_keeps_sway(walk):
     aligned, figures = align_to_plan(drifted, traj)
     assert figures["root_error_before_max_m"] > 0.25
     assert figures["root_error_after_max_m"] <= 0.02 + 1e-9
-    _, clean = align_to_plan(motion, traj)  # the gait's own pelvic rotation is a few degrees
+    aligned_clean, clean = align_to_plan(motion, traj)  # the gait's own pelvic rotation and turn lead: a few degrees
     assert figures["heading_error_after_mean_deg"] < clean["heading_error_after_mean_deg"] + 0.5
     assert figures["heading_error_before_mean_deg"] > 10.0
     yaw_fixed = yaw_of_matrix(quat_to_matrix(aligned.local_quats[:, 0]))
-    yaw_orig = yaw_of_matrix(quat_to_matrix(motion.local_quats[:, 0]))
+    yaw_orig = yaw_of_matrix(quat_to_matrix(aligned_clean.local_quats[:, 0]))
     assert np.abs(np.angle(np.exp(1j * (yaw_fixed - yaw_orig))))[30:-30].max() < np.radians(3)
     # the gait's lateral sway survives alignment
     sway = np.linalg.norm(aligned.root_pos[:, :2] - traj.xy, axis=1)
@@ -114,10 +114,14 @@ def test_lock_feet_removes_injected_sliding():
     assert q["knee_flexion_min_deg"] > -1.0
 
 
-def test_postprocess_keeps_clean_motion_clean():
-    traj = PLANS["slalom"]
-    motion = ProceduralGait().generate([traj], [""], [8])[0]
-    final, figures = postprocess(motion, traj)
-    assert np.abs(final.joints - motion.joints).max() < 0.05
-    assert figures["root_error_after_max_m"] <= 0.02
-    assert final.contacts.shape == (motion.n_frames, 2)
+@pytest.mark.parametrize("name", sorted(PLANS))
+def test_postprocess_keeps_clean_motion_clean(name):
+    """The procedural gait needs little cleaning: no joint moves 7 cm (up to 12 cm with the gait of
+    2026-11-22 on these plans), the root stays within 2 cm of the plan."""
+    traj = PLANS[name]
+    for seed in (4, 8):
+        motion = ProceduralGait().generate([traj], [""], [seed])[0]
+        final, figures = postprocess(motion, traj)
+        assert np.abs(final.joints - motion.joints).max() < 0.07
+        assert figures["root_error_after_max_m"] <= 0.02
+        assert final.contacts.shape == (motion.n_frames, 2)
