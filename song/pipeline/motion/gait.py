@@ -89,6 +89,11 @@ _HEEL_STRIKE_DEG = 10.0  # foot pitch at touchdown (toes up)
 SWING_LIFT_RISE, SWING_LIFT_FALL = 0.2, (0.65, 0.3)  # rise; fall (walking, standing)
 SWING_DESCENT = 0.6  # the ankle goes from its toe-off height to its heel-strike height over the first 60 %
 SWING_LIFT = (0.06, 0.05, 0.10)  # a, b, max
+# Short steps (starting, stopping, repositioning, turning on the spot) are shuffles: the lift shrinks with
+# the toe's travel (the ankle's, plus the toe's sweep as the foot turns) below SHUFFLE_TRAVEL_M, down to
+# SHUFFLE_LIFT_M. A foot that travels this little never
+# moves fast enough near the floor to read as sliding (its peak speed at 85 steps/min is ~3.3 × travel/s).
+SHUFFLE_TRAVEL_M, SHUFFLE_LIFT_M = 0.3, 0.01
 SWING_PITCH = (0.05, 0.6)  # the foot turns from toe-down (toe-off) to toe-up (heel strike) over this window
 # Forward travel: a minimum-jerk profile over the whole swing, starting at toe-off (it used to wait 6 % of
 # the swing, so the foot trailed the body and the hip over-extended). Cut before its end (the foot still
@@ -347,6 +352,8 @@ def _foot_poses(
     progress = _min_jerk((sigma - a) / (b - a)) / _min_jerk(np.array((1.0 - a) / (b - a)))
     distance = np.linalg.norm(end[:, :2] - start[:, :2], axis=1)
     lift = np.clip(SWING_LIFT[0] + SWING_LIFT[1] * distance, SWING_LIFT[0], SWING_LIFT[2]) * h_scale
+    toe_travel = distance + np.linalg.norm(body.ankle_off[:2]) * np.abs(wrap_angle(cur[:, 2] - prev[:, 2]))
+    lift = np.maximum(lift * _smoothstep(toe_travel / SHUFFLE_TRAVEL_M), SHUFFLE_LIFT_M * h_scale)
     fall = SWING_LIFT_FALL[1] + (SWING_LIFT_FALL[0] - SWING_LIFT_FALL[1]) * walk
     bump = _smoothstep(sigma / SWING_LIFT_RISE) * _smoothstep((1.0 - sigma) / fall)
     swing_pos = start + (end - start) * progress[:, None]

@@ -7,7 +7,8 @@ Applied to every generated motion, in the paper's order:
 2. :func:`resample_motion` — onto the trajectory's time stamps (linear root, slerp rotations);
 3. :func:`smooth_motion` — Gaussian on the root, quaternion-aware smoothing of all rotations;
 4. foot-ground correction — :func:`detect_contacts` (height + horizontal speed, per joint type:
-   ankle and ball of the foot), then :func:`lock_feet`: during a contact the foot is translated so
+   ankle and ball of the foot; where the generator gives its stance flags, as the procedural gait
+   does, only within them, so a low shuffle step is not pinned to the floor), then :func:`lock_feet`: during a contact the foot is translated so
    its ball stays where it was planted and its sole touches the ground, blended in and out over a few
    frames; outside contacts the sole is kept above the ground (clearance). The pelvis is lowered
    where a corrected ankle would be out of reach, and the legs are re-solved with two-bone IK
@@ -290,6 +291,8 @@ def postprocess(
     smoothed = smooth_motion(resampled, smoothing_sigma_frames)
     joints = forward_kinematics(smoothed.rest_joints, smoothed.local_quats, smoothed.root_pos)[0]
     contacts = detect_contacts(joints, smoothed.rest_joints, traj.fps, contact_height_m, contact_speed_mps)
+    if smoothed.contacts is not None:  # the generator's stance flags: a low, slow swing (a shuffle) is no contact
+        contacts &= smoothed.contacts
     final, lock_stats = lock_feet(smoothed, contacts, blend_frames)
     final.local_quats = final.local_quats / np.linalg.norm(final.local_quats, axis=-1, keepdims=True)
     return final, {**{k: round(v, 6) for k, v in figures.items()}, **{k: round(v, 6) for k, v in lock_stats.items()}}

@@ -252,3 +252,25 @@ def test_head_trunk_and_pelvis_turn_before_the_path() -> None:
         leads = heading_leads(motion.local_quats, motion.rest_joints, motion.root_pos, plan.xy, plan.t)
         assert 0.18 <= leads["head"] <= 0.32, leads
         assert leads["head"] > leads["spine3"] > leads["pelvis"] >= 0.1, leads
+
+
+def test_repositioning_is_a_shuffle_not_a_full_step() -> None:
+    """A standing pedestrian who moves 15 cm takes low shuffle steps (the ball of the foot clears the floor
+    by ~3 cm, not the 10-13 cm of walking), which post-processing neither pins to the floor nor reads as
+    skating."""
+    n = 150
+    speed = np.zeros(n)
+    speed[45:75] = 0.15 * np.sin(np.linspace(0.0, np.pi, 30)) * np.pi / 2 / (30 / 30.0)  # 15 cm over 1 s
+    traj = trajectory_from_profiles(0, speed, np.zeros(n))
+    raw = ProceduralGait(CFG).generate([traj], [""], [2])[0]
+    stepped = ~raw.contacts.all(axis=1)
+    assert stepped.any()
+    joints = raw.joints
+    lift = max(
+        (joints[:, J[f"{side}_foot"], 2] - raw.rest_joints[J[f"{side}_foot"], 2])[stepped].max()
+        for side in ("left", "right")
+    )
+    assert 0.005 < lift < 0.04, lift
+    final, _ = postprocess(raw, traj)
+    assert np.abs(final.joints - raw.joints).max() < 0.02
+    assert foot_skating_ratio(final.joints, 30.0) == 0.0
