@@ -1,10 +1,10 @@
-"""Reference twin of the compiled personal-space anticipation (used by tests only)."""
+"""Reference twins of the compiled personal-space anticipation and radii (used by tests only)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from song.pipeline.crowd.avoidance import ANTICIPATION_GAIN, ANTICIPATION_MARGIN_M
+from song.pipeline.crowd.avoidance import ANTICIPATION_GAIN, ANTICIPATION_MARGIN_M, PERSONAL_MARGIN_M
 
 
 def anticipate_reference(
@@ -39,3 +39,22 @@ def anticipate_reference(
     out = preferred.copy()
     out[walking] = bent / np.maximum(np.hypot(bent[:, 0], bent[:, 1]), 1e-9)[:, None] * speed[walking, None]
     return out
+
+
+def personal_radii_reference(
+    positions: np.ndarray,
+    radii: np.ndarray,
+    walking: np.ndarray,
+    half_width: np.ndarray,
+    comfort_radius: np.ndarray | float,
+) -> np.ndarray:
+    """Reference twin of :func:`song.pipeline.crowd.avoidance.personal_radii` (vectorised numpy)."""
+    out = radii.astype(np.float64).copy()
+    if not walking.any():
+        return out
+    comfort = np.broadcast_to(np.asarray(comfort_radius, dtype=np.float64), radii.shape)
+    d = np.hypot(*(positions[:, None] - positions[None]).transpose(2, 0, 1))
+    np.fill_diagonal(d, np.inf)
+    fit = np.where(walking[None, :], 0.5 * d, d - radii[None, :] - comfort[:, None]).min(axis=1)
+    personal = np.minimum(np.minimum(comfort, half_width - radii), fit - PERSONAL_MARGIN_M)
+    return np.where(walking, np.maximum(personal, radii), radii)

@@ -12,15 +12,17 @@ and resolves body overlaps, so contact (centres closer than 2 × body radius) ne
 Body and personal space are separate: the body radius (``crowd.agent_radius_m``) is what touches; in
 open space people also keep ``crowd.comfort_distance_m`` between centres when they pass, and
 ``crowd.wall_comfort_m`` more than their body from walls, and give that up gracefully where a passage
-is too narrow for it (each pedestrian's personal space shrinks to the room it has to the nearest wall).
+is too narrow for it, or the crowd too dense.
 
 - ``orca`` (default): preferred velocities bent aside early from people who would pass closer than the
-  comfort distance (:func:`anticipate`, the personal space as a preference), then RVO2's optimal
-  reciprocal collision avoidance (:mod:`song.pipeline.crowd.orca`) at the body radius against other
-  people (the hard limit), the body radius plus the wall comfort (within the room it has) against
-  walls, and the whole
-  avoidance -- not RVO2's half -- against someone standing still. The time horizon
-  (``crowd.time_horizon_s``, 4 s) is also how far ahead encounters are anticipated.
+  comfort distance (:func:`anticipate`), then RVO2's optimal reciprocal collision avoidance
+  (:mod:`song.pipeline.crowd.orca`) with each walker's personal space as its radius
+  (:func:`personal_radii`: half the comfort distance where the passage is wide enough, shrinking to
+  the body in a narrow one, when it is about to touch someone's, and as the walker is held up in a
+  jam), the body radius for people standing, the body radius plus the wall comfort (within the room
+  it has) against walls, and the whole avoidance -- not RVO2's half -- against someone standing
+  still. The time horizon (``crowd.time_horizon_s``, 4 s) is also how far ahead encounters are
+  anticipated.
 - ``social_force``: Helbing & Molnár's social-force model (Phys. Rev. E 51, 4282, 1995) with the
   pedestrian interaction of Moussaïd et al. (Proc. R. Soc. B 276, 2755, 2009; the anisotropic,
   velocity-dependent form fitted to controlled experiments) and an exponential wall repulsion:
@@ -43,6 +45,8 @@ WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from t
 ROOM_MARGIN_M = 0.01  # the wall comfort never reaches closer than this to a wall
 ANTICIPATION_GAIN = 2.5  # sideways share of the preferred direction per unit of predicted comfort shortfall
 ANTICIPATION_MARGIN_M = 0.1  # the bend aims this far beyond the comfort distance (it fades to nothing at its aim)
+HALF_WIDTH_STEP_M = 0.05  # the passage half-width is resolved to this
+PERSONAL_MARGIN_M = 0.005  # a personal radius stays this far from touching anyone's (ORCA's collision branch)
 
 # social force (Moussaïd et al. 2009, Table 1; relaxation time and walls as in pedsim_ros' defaults)
 SF_RELAXATION_S = 0.5  # τ: time to reach the preferred velocity
@@ -108,14 +112,49 @@ class WallDistance:
         # to a cell: take one cell off, so the answer never exceeds the true room
         self.field = np.maximum(ndimage.distance_transform_edt(legal) - 1.0, 0.0) * p.resolution + p.agent_radius
         self.params = p
+        self._half_width: dict[float, np.ndarray] = {}
 
-    def at(self, xy: np.ndarray) -> np.ndarray:
-        """(N,) distance to the nearest wall at points (N, 2), m (the agent radius off the mesh)."""
+    def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         p = self.params
         col = np.minimum(np.maximum(((xy[:, 0] - p.origin[0]) / p.resolution).astype(np.int64), 0), p.shape[1] - 1)
         row = np.minimum(np.maximum((p.shape[0] - (xy[:, 1] - p.origin[1]) / p.resolution).astype(np.int64), 0),
                          p.shape[0] - 1)  # fmt: skip
-        return self.field[row, col]
+        return row, col
+
+    def at(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) distance to the nearest wall at points (N, 2), m (the agent radius off the mesh)."""
+        return self.field[self._cells(xy)]
+
+    def room_at(self, xy: np.ndarray, upto: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`at` and :meth:`half_width_at` of the same points, looked up once."""
+        cells = self._cells(xy)
+        return self.field[cells], self._thickness(upto)[cells]
+
+    def _thickness(self, upto: float) -> np.ndarray:
+        if upto not in self._half_width:
+            self._half_width[upto] = self._local_thickness(upto)
+        return self._half_width[upto]
+
+    def half_width_at(self, xy: np.ndarray, upto: float) -> np.ndarray:
+        """(N,) half the width of the passage at points (N, 2), m, capped at ``upto``.
+
+        The radius of the largest wall-free disc that holds the point ("local thickness", Hildebrand &
+        Rüegsegger 1997): half the corridor's width in a corridor, however near a wall the point lies;
+        the full ``upto`` in open space. Built once per cap from wall-free discs at 5 cm steps of radius.
+        """
+        return self._thickness(upto)[self._cells(xy)]
+
+    def _local_thickness(self, upto: float) -> np.ndarray:
+        import cv2
+
+        p = self.params
+        out = np.where(self.field > p.agent_radius, p.agent_radius, 0.0)
+        for radius in np.arange(p.agent_radius + HALF_WIDTH_STEP_M, upto + 1e-9, HALF_WIDTH_STEP_M):
+            k = max(int(round(radius / p.resolution)), 1)
+            disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * k + 1, 2 * k + 1))
+            covered = cv2.dilate((self.field >= radius).astype(np.uint8), disc) > 0
+            out[covered] = radius
+        return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -167,8 +206,9 @@ def anticipate(
     ``comfort_distance`` the walker's preferred direction gains a sideways component away from where
     the other will be, stronger the shorter the miss and the sooner it comes; people ``reach`` (the
     model's neighbour distance) or farther away are left out. The speed is unchanged.
-    The crowd's hard constraints (ORCA at the body radius, walls, overlap resolution) still decide the
-    velocity, so in a passage too narrow for comfort people simply pass at their body distance.
+    The crowd's hard constraints (ORCA at the personal radii of :func:`personal_radii`, walls, overlap
+    resolution) still decide the velocity, so in a passage too narrow for comfort people simply pass at
+    their body distance.
 
     Compiled (numba): a walker-by-pedestrian loop; the vectorised numpy form
     (:func:`song.pipeline.crowd._avoidance_reference.anticipate_reference`, its test twin) spent most
@@ -185,6 +225,57 @@ def anticipate(
         float(reach),
         ANTICIPATION_GAIN,
         ANTICIPATION_MARGIN_M,
+    )
+
+
+@numba.njit(cache=True, nogil=True)
+def _personal_kernel(positions, radii, walking, half_width, comfort, margin):  # pragma: no cover
+    out = radii.copy()
+    n = len(positions)
+    for i in range(n):
+        if not walking[i]:
+            continue
+        best = min(comfort[i], half_width[i] - radii[i])
+        for j in range(n):
+            if j == i:
+                continue
+            d = np.hypot(positions[j, 0] - positions[i, 0], positions[j, 1] - positions[i, 1])
+            fit = 0.5 * d if walking[j] else d - radii[j] - comfort[i]
+            best = min(best, fit - margin)
+        out[i] = max(best, radii[i])
+    return out
+
+
+def personal_radii(
+    positions: np.ndarray,
+    radii: np.ndarray,
+    walking: np.ndarray,
+    half_width: np.ndarray,
+    comfort_radius: np.ndarray | float,
+) -> np.ndarray:
+    """ORCA radii ``(N,)`` of the walkers' personal space: ``comfort_radius`` where there is room.
+
+    A walker's radius is at most the passage's half-width less its body (two people still pass each
+    other in a corridor: in a 1.2 m corridor 0.35 m, in a 1 m door the body), never so large that it
+    already overlaps another walker's (half their distance), and it fades to the body as the walker
+    comes within its comfort radius of someone standing (people step close to others waiting at a
+    counter). Never below the body radius; standing people keep their body radius.
+
+    Compiled (numba), called every frame; the numpy form
+    (:func:`song.pipeline.crowd._avoidance_reference.personal_radii_reference`) is its test twin.
+    """
+    radii = np.ascontiguousarray(radii, np.float64)
+    if np.ndim(comfort_radius) == 0:
+        comfort = np.full(radii.shape, float(comfort_radius))
+    else:
+        comfort = np.ascontiguousarray(comfort_radius, np.float64)
+    return _personal_kernel(
+        np.ascontiguousarray(positions, np.float64),
+        radii,
+        np.ascontiguousarray(walking, np.bool_),
+        np.ascontiguousarray(half_width, np.float64),
+        comfort,
+        PERSONAL_MARGIN_M,
     )
 
 
@@ -229,14 +320,20 @@ class OrcaAvoidance:
         # the room a walker has now and where its preferred velocity takes it within the obstacle horizon:
         # the comfort shrinks before a narrowing, so that ORCA's wall never holds a walker at its entrance
         ahead = positions + preferred * self.params.time_horizon_obst
-        wall = self.wall_distance.at(np.concatenate([positions, ahead])).reshape(2, -1).min(axis=0)
+        upto = 0.5 * self.comfort + float(np.max(radii, initial=0.0))
+        wall, half_width = self.wall_distance.room_at(np.concatenate([positions, ahead]), upto)
+        wall, half_width = wall.reshape(2, -1).min(axis=0), half_width.reshape(2, -1).min(axis=0)
         # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
         pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
         wall_radii = np.maximum(np.minimum(wall - ROOM_MARGIN_M, radii + self.wall_comfort * pace), radii)
         bent = anticipate(
             positions, velocities, preferred, self.comfort, self.params.time_horizon, self.params.neighbor_dist
         )
-        return orca_step(positions, velocities, bent, radii, max_speeds, self.walls, self.params, wall_radii)
+        # personal space shrinks as a walker is held up (people accept closer passes in a jam)
+        going = np.minimum(np.hypot(velocities[:, 0], velocities[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
+        comfort = radii + (0.5 * self.comfort - radii) * going
+        personal = personal_radii(positions, radii, max_speeds > 0, half_width, comfort)
+        return orca_step(positions, velocities, bent, personal, max_speeds, self.walls, self.params, wall_radii)
 
 
 class SocialForceAvoidance:

@@ -41,6 +41,7 @@ from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, prefer
 from song.pipeline.crowd.avoidance import LocalAvoidance
 
 ARRIVE_M = 0.05  # within this of the goal a pedestrian has arrived (it then stands there)
+CLOSE_ENOUGH_M = 0.5  # a pedestrian stalled this near its goal (a step) stops where it is: it has arrived
 CHECK_EVERY = 10  # frames between visibility checks (turn anticipation, off-corridor detection): 1/3 s
 CORNER_REACHED_M = 0.1  # closer than this to a corner, head for the next one (Detour's look-ahead)
 
@@ -414,6 +415,12 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
     w.best[idx[better]], w.last_progress[idx[better]] = remaining[better], t
     failed: dict[int, str] = {}
     for k in idx[~better & (t - w.last_progress[idx] > stall_s)]:
+        if _length(w.goal[k] - w.pos[k]) < CLOSE_ENOUGH_M:  # held a step from its spot: it stops where it is
+            w.goal[k] = w.pos[k].copy()
+            if not _next_leg(w, mesh, int(k), t):
+                w.arrived[k] = True
+                w.arrival[k] = t
+            continue
         if w.stops[k][w.leg[k]][2]:  # the crowd keeps it from its spot aside: it waits where it got to
             _next_leg(w, mesh, int(k), t)
             _reroute_around_standing(w, mesh, int(k), moving, radius, frame)

@@ -233,7 +233,7 @@ def extend_routines(
                 if fits and cfg.min_path_m <= length <= cfg.max_path_m:
                     options.append((oid, length))
                     ends.append(end)
-                    weights.append((1.0 + 2.0 * relatedness(objects[legs[-1].goal_object], objects[oid])) * length)
+                    weights.append((1.0 + 2.0 * relatedness(objects[legs[-1].goal_object], objects[oid])) * length**2)
             if not options:
                 break
             pick = int(rng.choice(len(options), p=np.asarray(weights) / np.sum(weights)))

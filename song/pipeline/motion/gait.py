@@ -42,7 +42,7 @@ from song.geometry.ik import two_bone_ik
 from song.geometry.rotations import matrix_to_quat, quat_slerp, quat_to_matrix, rot_x, rot_y, rot_z, wrap_angle
 from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import rest_joints
-from song.pipeline.motion.types import Motion, Trajectory, body_heading
+from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw
 
 # Walk ratio (step length / step frequency) is constant per person across speeds, 0.34-0.42 m·s in adults
 # around 0.38, and grows with body height (Sekiya & Nagasaki 1998, Gait Posture 7:225): the configured walk
@@ -189,21 +189,6 @@ class _Plan:
         return x, y, float(np.interp(time, self.t, self.heading))
 
 
-def _path_yaw(traj: Trajectory) -> np.ndarray:
-    """The direction of travel where the plan walks, its recorded yaw where it stands (blended by speed).
-
-    The crowd's yaw is a smoothed velocity heading that trails the path by ~0.1–0.3 s; a centred
-    derivative of the planned positions does not, and it knows the turn that is coming.
-    """
-    if len(traj.t) < 3:
-        return np.asarray(traj.yaw, dtype=np.float64)
-    vel = gaussian_filter1d(np.gradient(traj.xy, traj.t, axis=0), 2.0, axis=0, mode="nearest")
-    speed = np.linalg.norm(vel, axis=1)
-    direction = np.arctan2(vel[:, 1], vel[:, 0])
-    weight = np.clip((speed - 0.1) / 0.3, 0.0, 1.0)
-    return traj.yaw + weight * wrap_angle(direction - traj.yaw)
-
-
 def _ahead(signal: np.ndarray, t: np.ndarray, lead_s: float) -> np.ndarray:
     """``signal`` read ``lead_s`` seconds later (held at the end): a segment that turns before the path."""
     return np.interp(t + lead_s, t, signal)
@@ -212,7 +197,7 @@ def _ahead(signal: np.ndarray, t: np.ndarray, lead_s: float) -> np.ndarray:
 def _plan_signals(traj: Trajectory) -> _Plan:
     t = traj.t
     dt = 1.0 / traj.fps
-    heading = gaussian_filter1d(body_heading(_path_yaw(traj), t), 2.0, mode="nearest")
+    heading = gaussian_filter1d(body_heading(path_yaw(traj), t), 2.0, mode="nearest")
     if len(t) > 1:
         vel = np.gradient(traj.xy, t, axis=0)
         speed = gaussian_filter1d(np.linalg.norm(vel, axis=1), 2.0, mode="nearest")

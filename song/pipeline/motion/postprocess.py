@@ -34,7 +34,7 @@ from song.geometry.rotations import (
     yaw_of_matrix,
 )
 from song.geometry.skeleton import JOINT_INDEX as J
-from song.pipeline.motion.types import Motion, Trajectory, body_heading
+from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw
 
 LEGS = (
     (J["left_hip"], J["left_knee"], J["left_ankle"], J["left_foot"]),
@@ -47,7 +47,7 @@ _MAX_CONTACT_GAP = 2  # shorter breaks inside a contact are noise
 
 def _plan_at(traj: Trajectory, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     xy = np.stack([np.interp(t, traj.t, traj.xy[:, k]) for k in (0, 1)], axis=-1)
-    return xy, np.interp(t, traj.t, body_heading(traj.yaw, traj.t))
+    return xy, np.interp(t, traj.t, body_heading(path_yaw(traj), traj.t))
 
 
 def align_to_plan(

@@ -7,11 +7,13 @@ from typing import Any
 
 import numba
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from song.config import DEFAULT_FPS
 from song.datasets.run.layout import CROWD_FILE
 from song.errors import InputError
 from song.geometry.fk import forward_kinematics
+from song.geometry.rotations import wrap_angle
 
 MAX_TURN_RATE = 4.0  # rad/s: a body turns at most this fast (≈ 180° in 0.8 s); plans may flip yaw in one frame
 
@@ -123,3 +125,19 @@ class Motion:
     def joints(self) -> np.ndarray:
         """World joint positions ``(T, 24, 3)`` float64, metres."""
         return self.fk()[0]
+
+
+def path_yaw(traj: Trajectory) -> np.ndarray:
+    """The yaw ``(T,)`` a body walking the plan faces (the gait's heading and the alignment's reference).
+
+    The direction of travel where the plan walks, its recorded yaw where it stands (blended by speed).
+    The crowd's yaw is a smoothed velocity heading that trails the path by ~0.1–0.3 s; a centred
+    derivative of the planned positions does not, and it knows the turn that is coming.
+    """
+    if len(traj.t) < 3:
+        return np.asarray(traj.yaw, dtype=np.float64)
+    vel = gaussian_filter1d(np.gradient(traj.xy, traj.t, axis=0), 2.0, axis=0, mode="nearest")
+    speed = np.linalg.norm(vel, axis=1)
+    direction = np.arctan2(vel[:, 1], vel[:, 0])
+    weight = np.clip((speed - 0.1) / 0.3, 0.0, 1.0)
+    return traj.yaw + weight * wrap_angle(direction - traj.yaw)

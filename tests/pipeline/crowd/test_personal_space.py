@@ -120,3 +120,53 @@ def test_compiled_anticipation_equals_its_reference_twin() -> None:
                 anticipate_reference(pos, vel, pref, 1.0, 4.0, reach),
                 atol=1e-12,
             )
+
+
+def test_compiled_personal_radii_equal_their_reference_twin() -> None:
+    from song.pipeline.crowd._avoidance_reference import personal_radii_reference
+    from song.pipeline.crowd.avoidance import personal_radii
+
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 9, 40):
+        pos = rng.uniform(0, 6, (n, 2))
+        radii = np.full(n, R)
+        walking = rng.random(n) < 0.7
+        half_width = rng.uniform(0.2, 0.8, n)
+        comfort = rng.uniform(R, 0.5, n)
+        np.testing.assert_array_equal(
+            personal_radii(pos, radii, walking, half_width, comfort),
+            personal_radii_reference(pos, radii, walking, half_width, comfort),
+        )
+
+
+def test_personal_radius_by_room_neighbours_and_standing() -> None:
+    """Half the comfort distance in open space; the passage's half-width less the body in a corridor;
+    never overlapping another walker's; fading to the body next to someone standing."""
+    from song.pipeline.crowd.avoidance import personal_radii
+
+    radii, walking = np.full(2, R), np.array([True, True])
+    far = np.array([[0.0, 0.0], [5.0, 0.0]])
+    assert personal_radii(far, radii, walking, np.full(2, 2.0), 0.5).tolist() == [0.5, 0.5]
+    assert np.allclose(personal_radii(far, radii, walking, np.full(2, 0.6), 0.5), 0.35)  # 1.2 m corridor
+    assert np.allclose(personal_radii(far, radii, walking, np.full(2, 0.5), 0.5), R)  # 1.0 m door: the body
+    close = np.array([[0.0, 0.0], [0.7, 0.0]])
+    assert np.all(personal_radii(close, radii, walking, np.full(2, 2.0), 0.5) <= 0.35)  # no overlap
+    standing = np.array([True, False])
+    for gap, expected in ((2.0, 0.5), (1.0, R), (0.6, R)):
+        pos = np.array([[0.0, 0.0], [gap, 0.0]])
+        got = personal_radii(pos, radii, standing, np.full(2, 2.0), 0.5)
+        assert got[1] == R and abs(got[0] - expected) < 0.01, (gap, got)
+
+
+def test_passage_half_width_is_the_local_thickness(tmp_path: Path) -> None:
+    """In a 1.2 m wide corridor the half-width is 0.6 m across the whole width, against the wall too; in a
+    5 m room it is the cap everywhere, beside the walls too."""
+    from song.pipeline.crowd.avoidance import WallDistance
+
+    for width, expected in ((1.2, 0.6), (5.0, 0.75)):
+        mesh = scene_navmesh(load_scene_package(room(tmp_path, width, 8.0, f"w{width}")), R, CFG.contour_error_m)
+        walls = WallDistance(mesh)
+        x0 = 0.1 + R  # the first point a body centre reaches, beside the wall
+        across = np.column_stack([np.linspace(x0 + 0.02, x0 + width - 2 * R - 0.02, 9), np.full(9, 4.0)])
+        half = walls.half_width_at(across, 0.75)
+        assert np.all(np.abs(half - expected) <= 0.05 + 1e-9), (width, half)
