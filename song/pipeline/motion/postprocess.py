@@ -244,7 +244,6 @@ def lock_feet(motion: Motion, contacts: np.ndarray, blend_frames: int = 4) -> tu
     if not np.array_equal(root, motion.root_pos):
         joints, glob = forward_kinematics(rest, motion.local_quats, root)
     quats = motion.local_quats.copy()
-    forward = glob[:, 0, :, 0]
     for side, (hip, knee, ankle, _) in enumerate(LEGS):
         rows = moved[:, side] | (root[:, 2] != motion.root_pos[:, 2])
         if not rows.any():
@@ -253,7 +252,10 @@ def lock_feet(motion: Motion, contacts: np.ndarray, blend_frames: int = 4) -> tu
         axis = a - h
         axis_unit = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
         perp = (k - h) - np.sum((k - h) * axis_unit, axis=1, keepdims=True) * axis_unit
-        fwd = forward[rows]
+        # forward for a knee: between where the pelvis and the foot point (the generators' pole); the pelvis
+        # alone turns ahead of the legs in a turn, and a knee checked against it alone was flipped backwards
+        fwd = glob[rows, 0, :, 0] + glob[rows, ankle, :, 0]
+        fwd = fwd / np.maximum(np.linalg.norm(fwd, axis=1, keepdims=True), 1e-12)
         size = np.linalg.norm(perp, axis=1, keepdims=True)
         blend = np.clip(size / 0.01, 0.0, 1.0) * (np.sum(perp * fwd, axis=1, keepdims=True) > 0)
         pole = perp / np.maximum(size, 1e-12) * blend + fwd * (1.0 - blend)

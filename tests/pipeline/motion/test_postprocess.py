@@ -125,3 +125,27 @@ def test_postprocess_keeps_clean_motion_clean(name):
         assert np.abs(final.joints - motion.joints).max() < 0.07
         assert figures["root_error_after_max_m"] <= 0.02
         assert final.contacts.shape == (motion.n_frames, 2)
+
+
+def test_lock_feet_keeps_knees_forward_when_the_pelvis_turns_ahead_of_the_legs():
+    """A pelvis turned 120° ahead of its legs (a sharp turn with the trunk leading) and the pelvis lowered
+    by foot locking: the re-solved knees still bend forwards (checked against the pelvis alone, a swing
+    knee was flipped backwards by up to 65° in crowd runs)."""
+    from song.geometry.rotations import quat_about_z, quat_conj
+    from song.pipeline.motion.quality import knee_elbow_flexion
+
+    traj = PLANS["straight_1.0"]
+    motion = ProceduralGait().generate([traj], [""], [3])[0]
+    turn = quat_about_z(np.full(motion.n_frames, np.radians(120.0)))
+    quats = motion.local_quats.copy()
+    root = quats[:, 0]
+    for hip in (J["left_hip"], J["right_hip"]):  # the thighs keep their world orientation
+        quats[:, hip] = quat_mul(quat_mul(quat_mul(quat_conj(root), quat_conj(turn)), root), quats[:, hip])
+    quats[:, 0] = quat_mul(turn, root)
+    turned = replace(motion, local_quats=quats)
+    sunk = replace(turned, root_pos=turned.root_pos + np.array([0.0, 0.0, 0.03]))  # the feet float 3 cm: locked down
+    fixed, stats = lock_feet(sunk, motion.contacts, blend_frames=4)
+    assert stats["feet_corrected_fraction"] > 0.5
+    before = np.degrees(knee_elbow_flexion(turned.local_quats)["knee"])
+    after = np.degrees(knee_elbow_flexion(fixed.local_quats)["knee"])
+    assert before.min() >= 0.0 and after.min() >= 0.0
