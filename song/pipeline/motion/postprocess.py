@@ -8,11 +8,12 @@ Applied to every generated motion, in the paper's order:
 3. :func:`smooth_motion` — Gaussian on the root, quaternion-aware smoothing of all rotations;
 4. foot-ground correction — :func:`detect_contacts` (height + horizontal speed, per joint type:
    ankle and ball of the foot; where the generator gives its stance flags, as the procedural gait
-   does, only within them, so a low shuffle step is not pinned to the floor), then :func:`lock_feet`: during a contact the foot is translated so
-   its ball stays where it was planted and its sole touches the ground, blended in and out over a few
-   frames; outside contacts the sole is kept above the ground (clearance). The pelvis is lowered
-   where a corrected ankle would be out of reach, and the legs are re-solved with two-bone IK
-   (hip–knee–ankle, pole = the current knee direction, never backwards).
+   does, only within them, so a low shuffle step is not pinned to the floor), then :func:`lock_feet`:
+   during a contact the foot is translated so its ball stays where it was planted and its sole
+   touches the ground, blended in and out over a few frames; outside contacts the sole is kept above
+   the ground (clearance). The pelvis is lowered where a corrected ankle would be out of reach, and
+   the legs are re-solved with two-bone IK (hip–knee–ankle, pole = the current knee direction, never
+   backwards of the pelvis and foot).
 """
 
 from __future__ import annotations
