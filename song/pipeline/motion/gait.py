@@ -15,9 +15,9 @@ How it works (DESIGN §5.3; issue #5):
    mid-stance time (read from the *planned* trajectory, so deceleration and stops are anticipated),
    with the style's step width and toe-out. Stance feet never move (zero skating by construction);
    they roll over the heel after touchdown and over the ball before lift-off.
-4. **Swing.** The foot leaves the floor heel-high and travels forward at once (a minimum-jerk profile cut
-   before its end, so it still moves at touchdown); its height peaks early in the swing and falls while
-   it reaches forward; it pitches from toe-down to toe-up.
+4. **Swing.** The foot leaves the floor heel-high and travels forward at once (a minimum-jerk profile
+   over the whole swing); its height peaks early in the swing and falls while it reaches forward; it
+   pitches from toe-down to toe-up. Short steps are shuffles, lifted in proportion to their travel.
 5. **Body.** The pelvis follows the plan with a small lateral sway and a vertical bob, lowered where
    needed so both ankles stay reachable; pelvic rotation and list, counter-rotating thorax, lean
    into turns (``atan(v·ω/g)``), counter-phase arm swing with forward-only elbow flexion, a
@@ -51,13 +51,12 @@ from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_ya
 MEAN_HEIGHT_M, HEIGHT_SD_M = 1.71, 0.09
 WALK_RATIO_SPREAD = (0.93, 1.07)
 # The pelvis is lowered exactly as far as the leg reaches need where they bind, and elsewhere no faster
-# than PELVIS_DROP_STEP_M per frame (a Gaussian-smoothed cap reached over from the neighbouring frames,
-# so the knee was bent 12-17° at heel strike at 1.4 m/s); then by a loading-response dip: the knee yields
-# 15-20° after heel strike (peak at 12-15 % of the cycle) and straightens by mid-stance (Perry &
-# Burnfield 2010); at the skeleton's shank and thigh that is ~1 cm.
-# per frame at 30 FPS (1.2 m/s); slower limits hold the pelvis low for longer around each double support
-# (0.02 m: hip range 57° at 1.4 m/s instead of 49°)
-PELVIS_DROP_STEP_M = 0.04
+# than PELVIS_DROP_STEP_M per frame at 30 FPS (a Gaussian-smoothed cap reached over from the neighbouring
+# frames, so the knee was bent 12-17° at heel strike at 1.4 m/s; slower limits hold the pelvis low for
+# longer around each double support: 0.02 m gave a 57° hip range at 1.4 m/s instead of 49°); then by a
+# loading-response dip: the knee yields 15-20° after heel strike (peak at 12-15 % of the cycle) and
+# straightens by mid-stance (Perry & Burnfield 2010); at the skeleton's shank and thigh that is ~1 cm.
+PELVIS_DROP_STEP_M = 0.04  # m per frame (1.2 m/s)
 LOADING_DIP_M = 0.01
 LOADING_WINDOW = (0.8, 1.1, 1.5)  # foot phase: heel strike, deepest, straight again (stance is 0.8-2.0)
 LEG_REACH = 0.999  # the pelvis is lowered so that no ankle target lies beyond this share of the leg
@@ -91,15 +90,10 @@ SWING_DESCENT = 0.6  # the ankle goes from its toe-off height to its heel-strike
 SWING_LIFT = (0.06, 0.05, 0.10)  # a, b, max
 # Short steps (starting, stopping, repositioning, turning on the spot) are shuffles: the lift shrinks with
 # the toe's travel (the ankle's, plus the toe's sweep as the foot turns) below SHUFFLE_TRAVEL_M, down to
-# SHUFFLE_LIFT_M. A foot that travels this little never
-# moves fast enough near the floor to read as sliding (its peak speed at 85 steps/min is ~3.3 × travel/s).
+# SHUFFLE_LIFT_M. A foot that travels this little never moves fast enough near the floor to read as
+# sliding (its peak speed at 85 steps/min is ~3.3 × travel/s).
 SHUFFLE_TRAVEL_M, SHUFFLE_LIFT_M = 0.3, 0.01
 SWING_PITCH = (0.05, 0.6)  # the foot turns from toe-down (toe-off) to toe-up (heel strike) over this window
-# Forward travel: a minimum-jerk profile over the whole swing, starting at toe-off (it used to wait 6 % of
-# the swing, so the foot trailed the body and the hip over-extended). Cut before its end (the foot still
-# moving at touchdown) it lowered the hip range at 1.4 m/s by 5° more but bent the knee at heel strike and
-# the toe skimmed the floor (measured: benchmarks/motion.py --normative).
-SWING_TRAVEL = (0.0, 1.0)
 # Shoulder swing amplitude a + b·v degrees (scaled per person by 0.75-1.25): ±10-25° at 1.0-1.4 m/s, growing
 # with speed (Murray et al. 1967, J. Bone Joint Surg. 49A:336; Collins et al. 2009, Proc. R. Soc. B 276:3679).
 ARM_SWING_DEG = (6.0, 10.0)
@@ -333,8 +327,11 @@ def _foot_poses(
     sigma = np.clip(u / SWING, 0.0, 1.0)
     start = pose(prev[:, :2], prev[:, 2], beta_off, "toe")
     end = pose(cur[:, :2], cur[:, 2], -beta_on, "heel")
-    a, b = SWING_TRAVEL
-    progress = _min_jerk((sigma - a) / (b - a)) / _min_jerk(np.array((1.0 - a) / (b - a)))
+    # forward travel: minimum jerk over the whole swing from toe-off (it used to wait 6 % of the swing, so the
+    # foot trailed the body and the hip over-extended); cut before its end (the foot still moving at
+    # touchdown) it took 5° more off the hip range at 1.4 m/s but bent the knee at heel strike and the toe
+    # skimmed the floor (benchmarks/motion.py --normative)
+    progress = _min_jerk(sigma)
     distance = np.linalg.norm(end[:, :2] - start[:, :2], axis=1)
     lift = np.clip(SWING_LIFT[0] + SWING_LIFT[1] * distance, SWING_LIFT[0], SWING_LIFT[2]) * h_scale
     toe_travel = distance + np.linalg.norm(body.ankle_off[:2]) * np.abs(wrap_angle(cur[:, 2] - prev[:, 2]))

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from song.geometry.rotations import quat_to_axis_angle
+from song.geometry.rotations import quat_to_axis_angle, quat_to_matrix, yaw_of_matrix
 from song.geometry.skeleton import JOINT_INDEX as J
 
 TOES = (J["left_foot"], J["right_foot"])
@@ -184,9 +184,7 @@ STEADY_MPS = 0.3  # strides whose planned speed stays above this count
 
 def _pelvis_yaw(local_quats: np.ndarray) -> np.ndarray:
     """Unwrapped yaw (degrees) of the pelvis's forward axis (the root's local rotation is global)."""
-    w, x, y, z = np.moveaxis(local_quats[:, 0], -1, 0)
-    fwd_x, fwd_y = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z)
-    return np.degrees(np.unwrap(np.arctan2(fwd_y, fwd_x)))
+    return np.degrees(np.unwrap(yaw_of_matrix(quat_to_matrix(local_quats[:, 0]))))
 
 
 def upper_arm_swing(joints: np.ndarray, local_quats: np.ndarray, side: str) -> np.ndarray:
