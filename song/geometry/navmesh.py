@@ -253,6 +253,18 @@ class Navmesh:
         self._kernel()
         return self._cache["args"]
 
+    def move_args(self) -> tuple:
+        """The kernel arrays compiled moves on the mesh take (``settle_moves`` of the crowd simulation).
+
+        ``(va, vb, verts, tris, seg_tri, wall grid, wall start, wall items, triangle grid, triangle start,
+        triangle items)``: enough for :meth:`constrain_moves`, :meth:`segment_clear` and :meth:`contains`.
+        """
+        if "move_args" not in self._cache:
+            k = self._kernel()
+            names = ("va", "vb", "verts", "tris", "seg_tri", "grid", "sstart", "sitems", "grid", "tstart", "titems")
+            self._cache["move_args"] = tuple(k[n] for n in names)
+        return self._cache["move_args"]
+
     @property
     def area(self) -> float:
         """Mesh area, m²."""
@@ -735,7 +747,9 @@ def carve_discs(mesh: Navmesh, centres: np.ndarray, radius: float) -> Navmesh:
     from shapely.geometry import Polygon
     from shapely.geometry.polygon import orient
 
-    region = shapely.union_all([Polygon(r[0], r[1:]) for r in _component_rings(mesh)])
+    if "region" not in mesh._cache:  # the mesh's polygons, the same for every carving (crowd replans)
+        mesh._cache["region"] = shapely.union_all([Polygon(r[0], r[1:]) for r in _component_rings(mesh)])
+    region = mesh._cache["region"]
     quad = 4
     grown = radius / np.cos(np.pi / (4 * quad))  # the 16-gon's edges touch the true circle
     holes = shapely.union_all(shapely.buffer(shapely.points(np.asarray(centres).reshape(-1, 2)), grown, quad_segs=quad))

@@ -1,7 +1,9 @@
-"""Compiled pair loops of the crowd simulation's frame step (numba).
+"""Compiled (numba) pieces of the crowd simulation's frame step.
 
-At indoor crowd sizes (tens of pedestrians) the numpy forms of these all-pairs computations cost more in
-array set-up than in arithmetic, and they run several times per frame; their reference twins live in
+At indoor crowd sizes (tens of pedestrians) a frame's arithmetic is small: as numpy and navmesh calls,
+the frame cost ~300 µs, almost all of it dispatch. A frame is now a handful of compiled calls (the
+avoidance inputs, the avoidance model, the settled moves, progress, the record) with Python left for
+what is rare (corner look-ahead checks, replans, stops). The reference twins live in
 :mod:`song.pipeline.crowd._simulate_reference`.
 """
 
@@ -9,6 +11,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+
+from song.geometry import _navmesh_kernel as _nk
 
 
 @numba.njit(cache=True, nogil=True)
@@ -86,3 +90,172 @@ def preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, d
         norm = max(np.hypot(sx, sy), 1e-9)
         pref[i, 0], pref[i, 1] = sx / norm * desired, sy / norm * desired
     return pref
+
+
+@numba.njit(cache=True, nogil=True)
+def _on_mesh(x, y, tol, va, vb, verts, tris, tgrid, tstart, titems):  # pragma: no cover
+    """The point is on the mesh within ``tol`` m (``Navmesh.contains``)."""
+    if _nk._locate_one(x, y, tol, verts, tris, tgrid, tstart, titems) >= 0:
+        return True
+    if len(va) == 0:
+        return False
+    return _nk._nearest_wall(x, y, va, vb, verts, -1, np.zeros(0, dtype=np.int64))[2] <= tol
+
+
+@numba.njit(cache=True, nogil=True)
+def _constrain(px, py, qx, qy, stamp, tick, va, vb, verts, tris, seg_tri, hgrid, hstart, hitems):  # pragma: no cover
+    """One move p→q kept on the mesh (``Navmesh.constrain_moves``)."""
+    if _nk._ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick, 0.0):
+        return qx, qy
+    cx, cy, _, k = _nk._nearest_wall(qx, qy, va, vb, verts, -1, np.zeros(0, dtype=np.int64))
+    return _nk._nudge(cx, cy, k, verts, tris, seg_tri)
+
+
+@numba.njit(cache=True, nogil=True)
+def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, mesh):  # pragma: no cover
+    """The frame's moves from the avoidance model's velocities: ``(new positions (N, 2), velocities (N, 2))``.
+
+    ``wanted`` (M, 2) are the new velocities of pedestrians ``rows`` (M,); the others' are 0.
+
+    In order: the acceleration clamp; moves kept on the mesh (sliding along walls); up to ``passes``
+    overlap resolution passes (:func:`overlap_push` within each walker's speed budget, again on the
+    mesh); a step that sliding lengthened beyond the speed limit shortened back (or cancelled when the
+    shortened one would leave the mesh). Non-walkers stay put. ``mesh`` is the navmesh kernel tuple
+    ``(va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid, tstart, titems)``.
+    One compiled call per frame: as numpy and navmesh calls these were ~20 dispatches a frame. The
+    reference twin is :func:`song.pipeline.crowd._simulate_reference.settle_moves_reference`.
+    """
+    va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid, tstart, titems = mesh
+    n = len(pos)
+    stamp = np.zeros(len(va), dtype=np.int64)
+    tick = 0
+    target = pos.copy()
+    full = np.zeros((n, 2))
+    for m in range(len(rows)):
+        full[rows[m], 0], full[rows[m], 1] = wanted[m, 0], wanted[m, 1]
+    for i in range(n):
+        if not moving[i]:
+            continue
+        dvx, dvy = full[i, 0] - vel[i, 0], full[i, 1] - vel[i, 1]
+        norm = np.hypot(dvx, dvy)
+        if norm > accel_limit:
+            dvx, dvy = dvx / max(norm, 1e-12) * accel_limit, dvy / max(norm, 1e-12) * accel_limit
+        vx, vy = vel[i, 0] + dvx, vel[i, 1] + dvy
+        tick += 1
+        target[i, 0], target[i, 1] = _constrain(pos[i, 0], pos[i, 1], pos[i, 0] + vx * dt, pos[i, 1] + vy * dt, stamp,
+                                                tick, va, vb, verts, tris, seg_tri, hgrid, hstart, hitems)  # fmt: skip
+    for _ in range(passes):
+        push, found = overlap_push(target, moving, min_dist)
+        if not found:
+            break
+        for i in range(n):
+            if not moving[i] or abs(push[i, 0]) + abs(push[i, 1]) <= 0.0:
+                continue
+            sx, sy = target[i, 0] + push[i, 0] - pos[i, 0], target[i, 1] + push[i, 1] - pos[i, 1]
+            scale = min(1.0, speed[i] * dt / max(np.hypot(sx, sy), 1e-12))
+            tick += 1
+            target[i, 0], target[i, 1] = _constrain(pos[i, 0], pos[i, 1], pos[i, 0] + sx * scale,
+                                                    pos[i, 1] + sy * scale, stamp, tick, va, vb, verts, tris,
+                                                    seg_tri, hgrid, hstart, hitems)  # fmt: skip
+    for i in range(n):  # sliding along a non-convex wall can lengthen a step a little
+        dx, dy = target[i, 0] - pos[i, 0], target[i, 1] - pos[i, 1]
+        size = np.hypot(dx, dy)
+        if not size > speed[i] * dt * (1 + 1e-9):  # rounding alone is not a violation
+            continue
+        f = speed[i] * dt / size
+        x, y = pos[i, 0] + dx * f, pos[i, 1] + dy * f
+        tick += 1
+        clear = _nk._ray_clear(pos[i, 0], pos[i, 1], x, y, va, vb, verts, hgrid, hstart, hitems, stamp, tick)
+        if clear and _on_mesh(x, y, 1e-9, va, vb, verts, tris, tgrid, tstart, titems):  # may end on an edge
+            target[i, 0], target[i, 1] = x, y
+        else:
+            target[i, 0], target[i, 1] = pos[i, 0], pos[i, 1]
+    new_vel = (target - pos) / dt
+    return target, new_vel
+
+
+@numba.njit(cache=True, nogil=True)
+def progress(pos, goal, cur, rest, best, last_progress, moving, t, arrive, step, stall_s):  # pragma: no cover
+    """Walkers' progress this frame: ``(indices of those arrived at their stop, indices of those stalled)``.
+
+    A walker within ``arrive`` m of its stop has arrived there. Any other walker whose remaining path
+    (to its current corner, then along the corners ``rest``) is ``step`` m shorter than its best so far
+    makes progress (``best`` and ``last_progress`` are updated in place, to ``t``); one that has made
+    none for more than ``stall_s`` is stalled.
+    """
+    n = len(pos)
+    done, stalled = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    n_done = n_stalled = 0
+    for i in range(n):
+        if not moving[i]:
+            continue
+        if np.hypot(goal[i, 0] - pos[i, 0], goal[i, 1] - pos[i, 1]) < arrive:
+            done[n_done] = i
+            n_done += 1
+            continue
+        remaining = np.hypot(cur[i, 0] - pos[i, 0], cur[i, 1] - pos[i, 1]) + rest[i]
+        if remaining < best[i] - step:
+            best[i], last_progress[i] = remaining, t
+        elif t - last_progress[i] > stall_s:
+            stalled[n_stalled] = i
+            n_stalled += 1
+    return done[:n_done], stalled[:n_stalled]
+
+
+@numba.njit(cache=True, nogil=True)
+def record_frame(pos, vel, smooth, heading, weight, stand_speed, xy, yaw, speed, frame):  # pragma: no cover
+    """Store a frame: positions, headings, speeds into ``xy`` (N, F, 2), ``yaw`` and ``speed`` (N, F) at ``frame``.
+
+    Headings follow the velocities smoothed in place in ``smooth`` (an EMA of ``weight``) and are held
+    (``heading``, updated in place) while that is slower than ``stand_speed``.
+    """
+    for i in range(len(vel)):
+        smooth[i, 0] = (1 - weight) * smooth[i, 0] + weight * vel[i, 0]
+        smooth[i, 1] = (1 - weight) * smooth[i, 1] + weight * vel[i, 1]
+        if np.hypot(smooth[i, 0], smooth[i, 1]) > stand_speed:
+            heading[i] = np.arctan2(smooth[i, 1], smooth[i, 0])
+        xy[i, frame, 0], xy[i, frame, 1] = pos[i, 0], pos[i, 1]
+        yaw[i, frame], speed[i, frame] = heading[i], np.hypot(vel[i, 0], vel[i, 1])
+
+
+@numba.njit(cache=True, nogil=True)
+def avoidance_inputs(
+    pos, vel, cur, nxt, has_next, goal, speed, moving, radius, dt, reach, influence, frame
+):  # pragma: no cover
+    """Who the avoidance model steers this frame, and its inputs for them.
+
+    The walkers and whoever stands within ``reach`` of one (others cannot change the answer); those
+    standing are marked in ``influence`` (in place: they may change a walker's step in ``frame``).
+    Returns ``(rows (M,), positions (M, 2), velocities (M, 2), preferred velocities (M, 2)``
+    (:func:`preferred_velocities`), ``body radii (M,), speed limits (M,))`` (0 for those standing).
+    """
+    near = near_walkers(pos, moving, reach)
+    pref = preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, dt)
+    rows = np.nonzero(moving | near)[0]
+    for i in rows:
+        if near[i]:
+            influence[i] = min(influence[i], frame)
+    limits = np.where(moving, speed, 0.0)[rows]
+    return rows, pos[rows], vel[rows], pref[rows], np.full(len(rows), radius), limits
+
+
+@numba.njit(cache=True, nogil=True)
+def walking(depart, arrived, yield_until, dwell_until, t):  # pragma: no cover
+    """(N,) bool: departed, not finished, not standing aside, not dwelling at a stop at time ``t``."""
+    n = len(depart)
+    out = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        out[i] = depart[i] <= t and not arrived[i] and yield_until[i] <= t and dwell_until[i] <= t
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def reached_corners(pos, cur, has_next, moving, reach):  # pragma: no cover
+    """Indices of the walkers closer than ``reach`` to a corner that is not their goal."""
+    out = np.empty(len(pos), dtype=np.int64)
+    m = 0
+    for i in range(len(pos)):
+        if moving[i] and has_next[i] and np.hypot(cur[i, 0] - pos[i, 0], cur[i, 1] - pos[i, 1]) < reach:
+            out[m] = i
+            m += 1
+    return out[:m]

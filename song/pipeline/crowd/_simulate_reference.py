@@ -42,3 +42,38 @@ def preferred_velocities_reference(pos, cur, nxt, has_next, goal, speed, moving,
     desired = np.where(nxt_ok, desired, np.minimum(desired, len0 / dt))
     pref[idx] = steer / np.maximum(np.hypot(steer[:, 0], steer[:, 1]), 1e-9)[:, None] * desired[:, None]
     return pref
+
+
+def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes):
+    """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.settle_moves` (numpy and navmesh calls).
+
+    ``mesh`` is the :class:`song.geometry.navmesh.Navmesh` itself.
+    """
+    full = np.zeros_like(vel)
+    full[rows] = wanted
+    dv = full - vel
+    norm = np.hypot(dv[:, 0], dv[:, 1])[:, None]
+    new_vel = vel + np.where(norm > accel_limit, dv / np.maximum(norm, 1e-12) * accel_limit, dv)
+    new_vel[~moving] = 0.0
+    target = pos.copy()
+    rows = np.flatnonzero(moving)
+    if len(rows):
+        target[rows] = mesh.constrain_moves(pos[rows], pos[rows] + new_vel[rows] * dt)
+    max_step = speed * dt
+    for _ in range(passes):
+        push, found = overlap_push_reference(target, moving, min_dist)
+        if not found:
+            break
+        step = target + push - pos
+        step *= np.minimum(1.0, max_step[:, None] / np.maximum(np.hypot(step[:, 0], step[:, 1]), 1e-12)[:, None])
+        rows = np.flatnonzero(moving & (np.abs(push).sum(axis=1) > 0))
+        if len(rows):
+            target[rows] = mesh.constrain_moves(pos[rows], pos[rows] + step[rows])
+    disp = target - pos
+    size = np.hypot(disp[:, 0], disp[:, 1])
+    over = np.flatnonzero(size > speed * dt * (1 + 1e-9))
+    if len(over):
+        scaled = pos[over] + disp[over] * (speed[over] * dt / size[over])[:, None]
+        ok = mesh.segment_clear(pos[over], scaled) & mesh.contains(scaled, tol=1e-9)
+        target[over] = np.where(ok[:, None], scaled, pos[over])
+    return target, (target - pos) / dt

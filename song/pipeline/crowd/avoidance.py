@@ -39,7 +39,8 @@ import numpy as np
 
 from song.config import CrowdConfig
 from song.geometry.navmesh import Navmesh, obstacle_rings
-from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, build_obstacles, orca_step
+from song.pipeline.crowd._orca_kernel import step_kernel
+from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, build_obstacles, kernel_tail
 
 WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from the mesh
 ROOM_MARGIN_M = 0.01  # the wall comfort never reaches closer than this to a wall
@@ -128,9 +129,10 @@ class WallDistance:
     def room_at(self, xy: np.ndarray, upto: float) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`at` and :meth:`half_width_at` of the same points, looked up once."""
         cells = self._cells(xy)
-        return self.field[cells], self._thickness(upto)[cells]
+        return self.field[cells], self.thickness(upto)[cells]
 
-    def _thickness(self, upto: float) -> np.ndarray:
+    def thickness(self, upto: float) -> np.ndarray:
+        """The grid of :meth:`half_width_at` (rows, cols), m."""
         if upto not in self._half_width:
             self._half_width[upto] = self._local_thickness(upto)
         return self._half_width[upto]
@@ -142,7 +144,7 @@ class WallDistance:
         Rüegsegger 1997): half the corridor's width in a corridor, however near a wall the point lies;
         the full ``upto`` in open space. Built once per cap from wall-free discs at 5 cm steps of radius.
         """
-        return self._thickness(upto)[self._cells(xy)]
+        return self.thickness(upto)[self._cells(xy)]
 
     def _local_thickness(self, upto: float) -> np.ndarray:
         import cv2
@@ -279,6 +281,49 @@ def personal_radii(
     )
 
 
+@numba.njit(cache=True, nogil=True)
+def _room(x, y, grid, ox, oy, res):  # pragma: no cover
+    """``grid``'s value at the cell holding (x, y) (:meth:`WallDistance._cells`)."""
+    rows, cols = grid.shape
+    col = min(max(int((x - ox) / res), 0), cols - 1)
+    row = min(max(int(rows - (y - oy) / res), 0), rows - 1)
+    return grid[row, col]
+
+
+@numba.njit(cache=True, nogil=True)
+def _orca_velocities(
+    positions, velocities, preferred, radii, max_speeds, field, thickness, frame, comfort, reach, tail
+):  # pragma: no cover
+    """ORCA's new velocities with personal space, as :meth:`OrcaAvoidance.velocities` documents.
+
+    ``frame`` is the grids' ``(origin x, origin y, resolution)``; ``comfort`` is ``(comfort distance,
+    wall comfort, time horizon, obstacle time horizon)``; ``tail`` is :func:`song.pipeline.crowd.orca.
+    kernel_tail`. One compiled call per frame (as numpy calls the inputs alone were ~30 dispatches).
+    """
+    ox, oy, res = frame
+    distance, wall_comfort, horizon, horizon_obst = comfort
+    n = len(positions)
+    half_width, wall_radii, personal_comfort = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        x, y = positions[i, 0], positions[i, 1]
+        ax, ay = x + preferred[i, 0] * horizon_obst, y + preferred[i, 1] * horizon_obst
+        wall = min(_room(x, y, field, ox, oy, res), _room(ax, ay, field, ox, oy, res))
+        half_width[i] = min(_room(x, y, thickness, ox, oy, res), _room(ax, ay, thickness, ox, oy, res))
+        top = max(max_speeds[i], 1e-9)
+        # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
+        pace = min(np.hypot(preferred[i, 0], preferred[i, 1]) / top, 1.0)
+        wall_radii[i] = max(min(wall - ROOM_MARGIN_M, radii[i] + wall_comfort * pace), radii[i])
+        # personal space shrinks as a walker is held up (people accept closer passes in a jam)
+        going = min(np.hypot(velocities[i, 0], velocities[i, 1]) / top, 1.0)
+        personal_comfort[i] = radii[i] + (0.5 * distance - radii[i]) * going
+    bent = preferred
+    if n >= 2:
+        bent = _anticipate_kernel(positions, velocities, preferred, distance, horizon, reach, ANTICIPATION_GAIN,
+                                  ANTICIPATION_MARGIN_M)  # fmt: skip
+    personal = _personal_kernel(positions, radii, max_speeds > 0, half_width, personal_comfort, PERSONAL_MARGIN_M)
+    return step_kernel(positions, velocities, bent, personal, wall_radii, max_speeds, *tail)
+
+
 def orca_walls(mesh: Navmesh) -> ObstacleSet | None:
     """ORCA walls: the mesh grown back by its agent radius (+ a 5 mm margin), in RVO2 vertex order."""
     rings = obstacle_rings(mesh, mesh.params.agent_radius + WALL_MARGIN_M)
@@ -302,6 +347,13 @@ class OrcaAvoidance:
         self.walls = orca_walls(mesh)
         self.wall_distance = WallDistance(mesh)
         self.comfort, self.wall_comfort = cfg.comfort_distance_m, cfg.wall_comfort_m
+        p = self.wall_distance.params
+        self._constants = (  # what the compiled step takes besides the pedestrians and the grids, built once
+            (float(p.origin[0]), float(p.origin[1]), float(p.resolution)),
+            (self.comfort, self.wall_comfort, self.params.time_horizon, self.params.time_horizon_obst),
+            self.params.neighbor_dist,
+            kernel_tail(self.walls, self.params),
+        )
 
     @property
     def neighbor_dist(self) -> float:
@@ -319,21 +371,17 @@ class OrcaAvoidance:
         """ORCA's new velocities with personal-space radii (see :func:`song.pipeline.crowd.orca.orca_step`)."""
         # the room a walker has now and where its preferred velocity takes it within the obstacle horizon:
         # the comfort shrinks before a narrowing, so that ORCA's wall never holds a walker at its entrance
-        ahead = positions + preferred * self.params.time_horizon_obst
-        upto = 0.5 * self.comfort + float(np.max(radii, initial=0.0))
-        wall, half_width = self.wall_distance.room_at(np.concatenate([positions, ahead]), upto)
-        wall, half_width = wall.reshape(2, -1).min(axis=0), half_width.reshape(2, -1).min(axis=0)
-        # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
-        pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
-        wall_radii = np.maximum(np.minimum(wall - ROOM_MARGIN_M, radii + self.wall_comfort * pace), radii)
-        bent = anticipate(
-            positions, velocities, preferred, self.comfort, self.params.time_horizon, self.params.neighbor_dist
+        upto = 0.5 * self.comfort + (float(radii.max()) if len(radii) else 0.0)
+        return _orca_velocities(
+            np.ascontiguousarray(positions, np.float64),
+            np.ascontiguousarray(velocities, np.float64),
+            np.ascontiguousarray(preferred, np.float64),
+            np.ascontiguousarray(radii, np.float64),
+            np.ascontiguousarray(max_speeds, np.float64),
+            self.wall_distance.field,
+            self.wall_distance.thickness(upto),
+            *self._constants,
         )
-        # personal space shrinks as a walker is held up (people accept closer passes in a jam)
-        going = np.minimum(np.hypot(velocities[:, 0], velocities[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)
-        comfort = radii + (0.5 * self.comfort - radii) * going
-        personal = personal_radii(positions, radii, max_speeds > 0, half_width, comfort)
-        return orca_step(positions, velocities, bent, personal, max_speeds, self.walls, self.params, wall_radii)
 
 
 class SocialForceAvoidance:

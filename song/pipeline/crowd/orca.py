@@ -255,6 +255,23 @@ def _tree_args(obstacles: ObstacleSet | None) -> tuple:
     return cached
 
 
+def kernel_tail(obstacles: ObstacleSet | None, params: OrcaParams) -> tuple:
+    """What :func:`song.pipeline.crowd._orca_kernel.step_kernel` takes after the per-agent arrays.
+
+    The obstacle arrays (built once per obstacle set) and the parameters, in the kernel's order; a
+    caller stepping every frame builds it once.
+    """
+    scalars = (
+        float(params.neighbor_dist),
+        int(params.max_neighbors),
+        float(params.time_horizon),
+        float(params.time_horizon_obst),
+        float(params.time_step),
+        bool(params.static_full_responsibility),
+    )
+    return (*_tree_args(obstacles), *scalars)
+
+
 def _kernel_args(
     positions, velocities, radii, max_speeds, obstacles: ObstacleSet | None, params: OrcaParams, wall_radii=None
 ):
@@ -263,15 +280,7 @@ def _kernel_args(
     vel = np.ascontiguousarray(velocities, dtype=np.float64).reshape(-1, 2)
     walls = _per_agent(radii if wall_radii is None else wall_radii, n)
     radii, speeds = _per_agent(radii, n), _per_agent(max_speeds, n)
-    tree = _tree_args(obstacles)
-    scalars = (
-        float(params.neighbor_dist),
-        int(params.max_neighbors),
-        float(params.time_horizon),
-        float(params.time_horizon_obst),
-        float(params.time_step),
-    )
-    return pos, vel, (radii, walls), speeds, tree, (*scalars, bool(params.static_full_responsibility))
+    return pos, vel, (radii, walls), speeds, kernel_tail(obstacles, params)
 
 
 def orca_step(
@@ -299,11 +308,11 @@ def orca_step(
     Returns:
         (N, 2) float64 new velocities, m/s.
     """
-    pos, vel, (radii, walls), speeds, tree, scalars = _kernel_args(
+    pos, vel, (radii, walls), speeds, tail = _kernel_args(
         positions, velocities, radii, max_speeds, obstacles, params, wall_radii
     )
     pref = np.ascontiguousarray(pref_velocities, dtype=np.float64).reshape(-1, 2)
-    return step_kernel(pos, vel, pref, radii, walls, speeds, *tree, *scalars)
+    return step_kernel(pos, vel, pref, radii, walls, speeds, *tail)
 
 
 def orca_lines(
@@ -320,10 +329,8 @@ def orca_lines(
         per agent ``(points (L, 2), directions (L, 2), n_obstacle_lines)``; obstacle lines come first,
         velocities left of a line's direction are allowed.
     """
-    pos, vel, (radii, walls), speeds, tree, scalars = _kernel_args(
-        positions, velocities, radii, max_speeds, obstacles, params
-    )
-    lines, counts, n_obstacle = lines_kernel(pos, vel, radii, walls, speeds, *tree, *scalars)
+    pos, vel, (radii, walls), speeds, tail = _kernel_args(positions, velocities, radii, max_speeds, obstacles, params)
+    lines, counts, n_obstacle = lines_kernel(pos, vel, radii, walls, speeds, *tail)
     return [
         (lines[i, :c, :2], lines[i, :c, 2:], int(k)) for i, (c, k) in enumerate(zip(counts, n_obstacle, strict=True))
     ]

@@ -37,7 +37,14 @@ import numpy as np
 from song.config import CrowdConfig
 from song.datasets.run.intents import Intent
 from song.geometry.navmesh import Navmesh, carve_discs
-from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities
+from song.pipeline.crowd._crowd_kernel import (
+    avoidance_inputs,
+    progress,
+    reached_corners,
+    record_frame,
+    settle_moves,
+    walking,
+)
 from song.pipeline.crowd.avoidance import LocalAvoidance
 
 ARRIVE_M = 0.05  # within this of the goal a pedestrian has arrived (it then stands there)
@@ -303,7 +310,7 @@ def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: 
 def _update_corners(w: _Walkers, mesh: Navmesh, moving: np.ndarray, check: bool) -> None:
     """Pass reached corners; on check frames pass corners whose successor is visible, detour when lost."""
     for _ in range(8):  # corners closer together than the look-ahead are passed in one frame
-        reached = np.flatnonzero(moving & w.has_next & (_length(w.cur - w.pos) < CORNER_REACHED_M))
+        reached = reached_corners(w.pos, w.cur, w.has_next, moving, CORNER_REACHED_M)
         if not len(reached):
             break
         _advance(w, reached)
@@ -325,41 +332,6 @@ def _update_corners(w: _Walkers, mesh: Navmesh, moving: np.ndarray, check: bool)
             _set_path(w, k, np.vstack([detour, w.paths[k][w.corner[k] + 1 :]]))
 
 
-def _preferred(w: _Walkers, moving: np.ndarray, radius: float, dt: float) -> np.ndarray:
-    """Preferred velocities: Detour's smooth steer toward the corners, slowing within 2r of the goal."""
-    return preferred_velocities(w.pos, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, radius, dt)
-
-
-def _separate(w: _Walkers, mesh: Navmesh, target: np.ndarray, moving: np.ndarray, radius: float, dt: float):
-    """Overlap resolution passes: push overlapping pairs apart; walkers move within their speed limit."""
-    max_step = w.speed * dt
-    for _ in range(OVERLAP_PASSES):
-        push, found = overlap_push(target, moving, 2 * radius + OVERLAP_MARGIN_M)
-        if not found:
-            break
-        step = target + push - w.pos
-        size = _length(step)[:, None]
-        step *= np.minimum(1.0, max_step[:, None] / np.maximum(size, 1e-12))
-        rows = np.flatnonzero(moving & (np.abs(push).sum(axis=1) > 0))
-        if len(rows):
-            target[rows] = mesh.constrain_moves(w.pos[rows], w.pos[rows] + step[rows])
-    return target
-
-
-def _clamp_speed(w: _Walkers, mesh: Navmesh, target: np.ndarray, dt: float) -> np.ndarray:
-    """Sliding along a non-convex wall can lengthen a step a little: shorten it back to the speed limit."""
-    disp = target - w.pos
-    size = _length(disp)
-    over = np.flatnonzero(size > w.speed * dt * (1 + 1e-9))  # rounding alone is not a violation
-    if len(over):
-        scaled = w.pos[over] + disp[over] * (w.speed[over] * dt / size[over])[:, None]
-        ok = mesh.segment_clear(w.pos[over], scaled) & mesh.contains(
-            scaled, tol=1e-9
-        )  # a clear segment may end on an edge
-        target[over] = np.where(ok[:, None], scaled, w.pos[over])
-    return target
-
-
 def _mark_influence(w: _Walkers, idx, frame: int) -> None:
     """Pedestrians ``idx`` changed someone else's step in ``frame`` (a removal must roll back before it)."""
     idx = np.asarray(idx, dtype=np.int64)
@@ -372,49 +344,33 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
         w.vel = np.zeros_like(w.vel)
         return
     _update_corners(w, mesh, moving, frame % CHECK_EVERY == 0)
-    pref = _preferred(w, moving, r, dt)
     # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
-    near = near_walkers(w.pos, moving, max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M))
-    _mark_influence(w, np.flatnonzero(near), frame)  # they may change a walker's step
-    sub = np.flatnonzero(moving | near)
-    new_vel = np.zeros_like(w.vel)
-    new_vel[sub] = avoid.velocities(
-        w.pos[sub], w.vel[sub], pref[sub], np.full(len(sub), r), np.where(moving, w.speed, 0.0)[sub]
+    reach = max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M)
+    rows, *inputs = avoidance_inputs(
+        w.pos, w.vel, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, r, dt, reach, w.influence, frame
     )
-    dv = new_vel - w.vel
-    limit = cfg.max_accel_mps2 * dt
-    norm = _length(dv)[:, None]
-    new_vel = w.vel + np.where(norm > limit, dv / np.maximum(norm, 1e-12) * limit, dv)
-    new_vel[~moving] = 0.0
-    target = w.pos.copy()
-    rows = np.flatnonzero(moving)
-    if len(rows):
-        target[rows] = mesh.constrain_moves(w.pos[rows], w.pos[rows] + new_vel[rows] * dt)
-    target = _separate(w, mesh, target, moving, r, dt)
-    target = _clamp_speed(w, mesh, target, dt)
-    w.vel = (target - w.pos) / dt
-    w.pos = target
+    new_vel = avoid.velocities(*inputs)
+    w.pos, w.vel = settle_moves(
+        w.pos, w.vel, rows, new_vel, moving, w.speed, dt, cfg.max_accel_mps2 * dt, 2 * r + OVERLAP_MARGIN_M, OVERLAP_PASSES,
+        mesh.move_args(),
+    )  # fmt: skip
 
 
 def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, cfg: CrowdConfig):
     """Record arrivals at stops and at the end; replan stalled pedestrians once; return those stalled again."""
     t, stall_s, radius = frame / cfg.fps, cfg.stall_time_s, cfg.agent_radius_m
-    done = moving & (_length(w.goal - w.pos) < ARRIVE_M)
-    for k in np.flatnonzero(done):
+    done, stalled = progress(
+        w.pos, w.goal, w.cur, w.rest, w.best, w.last_progress, moving, t, ARRIVE_M, PROGRESS_M, stall_s
+    )
+    for k in done:
         aside = w.stops[k][w.leg[k]][2]
         if not _next_leg(w, mesh, int(k), t):
             w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
             w.arrival[k] = t
         elif aside:
             _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
-    idx = np.flatnonzero(moving & ~done)
-    if not len(idx):
-        return {}
-    remaining = _remaining(w, idx)
-    better = remaining < w.best[idx] - PROGRESS_M
-    w.best[idx[better]], w.last_progress[idx[better]] = remaining[better], t
     failed: dict[int, str] = {}
-    for k in idx[~better & (t - w.last_progress[idx] > stall_s)]:
+    for k in stalled:
         if _length(w.goal[k] - w.pos[k]) < CLOSE_ENOUGH_M:  # held a step from its spot: it stops where it is
             w.goal[k] = w.pos[k].copy()
             if not _next_leg(w, mesh, int(k), t):
@@ -536,7 +492,7 @@ class _Run:
         while self.frame < self.xy.shape[1] - 1 and not w.arrived.all():
             frame = self.frame + 1
             t = frame / cfg.fps
-            moving = (w.depart <= t) & ~w.arrived & (w.yield_until <= t) & (w.dwell_until <= t)
+            moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
             _step_frame(w, self.mesh, self.avoid, moving, cfg, frame)
             failed = _check_progress(w, self.mesh, moving, frame, cfg)
             if failed:
@@ -546,10 +502,9 @@ class _Run:
 
     def _record(self, frame: int) -> None:
         w = self.w
-        w.smooth = (1 - HEADING_SMOOTHING) * w.smooth + HEADING_SMOOTHING * w.vel
-        fast = _length(w.smooth) > STAND_SPEED
-        w.heading = np.where(fast, np.arctan2(w.smooth[:, 1], w.smooth[:, 0]), w.heading)
-        self.xy[:, frame], self.yaw[:, frame], self.speed[:, frame] = w.pos, w.heading, _length(w.vel)
+        record_frame(
+            w.pos, w.vel, w.smooth, w.heading, HEADING_SMOOTHING, STAND_SPEED, self.xy, self.yaw, self.speed, frame
+        )
         self.frame = frame
         if frame % SNAPSHOT_EVERY == 0:
             self.snapshots.append((frame, _snapshot(w)))

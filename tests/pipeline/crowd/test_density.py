@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from song.datasets.scenes import load_scene_package
-from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities
+from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities, settle_moves
 from song.pipeline.crowd._simulate_reference import (
     near_walkers_reference,
     overlap_push_reference,
     preferred_velocities_reference,
+    settle_moves_reference,
 )
 from song.pipeline.crowd.avoidance import make_avoidance
 from song.pipeline.crowd.navmesh import scene_navmesh
@@ -72,3 +73,29 @@ def test_compiled_pair_loops_equal_their_reference_twins() -> None:
         goal[:2] = pos[:2] + 0.1  # slowing down at the goal
         args = (pos, cur, nxt, has_next, goal, speed, moving, 0.25, 1 / 30)
         np.testing.assert_allclose(preferred_velocities(*args), preferred_velocities_reference(*args), atol=1e-12)
+
+
+def test_compiled_frame_moves_equal_their_reference_twin(make_scene) -> None:
+    # crowds packed into the two rooms and the 1 m door: steps into walls slide, overlaps are pushed apart
+    mesh = scene_navmesh(load_scene_package(make_scene(door=1.0)), R, CFG.contour_error_m)
+    rng = np.random.default_rng(3)
+    tri = mesh.vertices[mesh.triangles]
+    dt, limit, min_dist = 1 / 30, CFG.max_accel_mps2 / 30, 2 * R + 0.002
+    checked = 0
+    for n in (1, 6, 30):
+        for _ in range(20):
+            w = rng.dirichlet(np.ones(3), n)
+            pos = np.einsum("nk,nkd->nd", w, tri[rng.integers(len(tri), size=n)])
+            vel = rng.normal(0, 0.8, (n, 2))
+            moving = rng.random(n) < 0.7
+            rows = np.flatnonzero(moving | (rng.random(n) < 0.2))
+            wanted = rng.normal(0, 1.5, (len(rows), 2))
+            speed = rng.uniform(0.5, 1.8, n)
+            args = (pos, vel, rows, wanted, moving, speed, dt, limit, min_dist, 3)
+            new_pos, new_vel = settle_moves(*args, mesh.move_args())
+            ref_pos, ref_vel = settle_moves_reference(mesh, *args)
+            np.testing.assert_allclose(new_pos, ref_pos, rtol=0, atol=1e-12)  # the pair loop sums in another order
+            np.testing.assert_allclose(new_vel, ref_vel, rtol=0, atol=1e-9)
+            assert (new_pos[~moving] == pos[~moving]).all()
+            checked += int((np.hypot(*(new_pos - pos).T) > 0).sum())
+    assert checked > 300
