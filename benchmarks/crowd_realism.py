@@ -28,10 +28,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, emit  # noqa: E402
 
 from song.config import SongConfig  # noqa: E402
-from song.datasets.run import read_crowd  # noqa: E402
+from song.datasets.run import read_crowd, read_intents  # noqa: E402
+from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.datasets.scenes.generate import VENUE_ORDER, generate_scene  # noqa: E402
 from song.pipeline.chain import iter_run  # noqa: E402
-from song.pipeline.crowd.realism import Track, crowd_statistics, read_obsmat  # noqa: E402
+from song.pipeline.crowd.realism import Track, crowd_statistics, read_obsmat, stop_facing  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "reference" / "pedestrians"
 SAMPLES = ROOT / "datasets" / "sample_scenes"
@@ -59,7 +60,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
     run = work / f"{avoidance}-{profile}"
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
-    tracks, closest, shares, arrived, total = [], np.inf, [], 0, 0
+    tracks, closest, shares, arrived, total, facing = [], np.inf, [], 0, 0, []
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
@@ -68,6 +69,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
         total += len(status)
         if len(crowd.ids) == 0:
             continue
+        objects = load_scene_package(scenes / scene.name).semantic_map.object_by_id()
+        facing += stop_facing(crowd, read_intents(scene / "intents.json").intents, objects)
         scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
         tracks.append(scene_tracks)
         shares.append(_walking_share(scene_tracks))
@@ -84,6 +87,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
             "arrived_share": round(arrived / max(total, 1), 4),
             "walking_share_5_55_mean": round(float(np.mean(share)), 4) if len(share) else None,
             "walking_share_5_55_min": round(float(np.min(share)), 4) if len(share) else None,
+            "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
+            "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
             "scenes": len(results),
             "failed_scenes": [x.scene_id for x in results if x.status != "ok"],

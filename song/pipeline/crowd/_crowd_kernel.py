@@ -14,6 +14,9 @@ import numpy as np
 
 from song.geometry import _navmesh_kernel as _nk
 
+HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
+STAND_SPEED = 0.05  # m/s: below this the heading is held
+
 
 @numba.njit(cache=True, nogil=True)
 def near_walkers(pos: np.ndarray, moving: np.ndarray, reach: float) -> np.ndarray:  # pragma: no cover
@@ -203,16 +206,21 @@ def progress(pos, goal, cur, rest, best, last_progress, moving, t, arrive, step,
 
 
 @numba.njit(cache=True, nogil=True)
-def record_frame(pos, vel, smooth, heading, weight, stand_speed, xy, yaw, speed, frame):  # pragma: no cover
+def record_frame(pos, vel, smooth, heading, face, max_turn, xy, yaw, speed, frame):  # pragma: no cover
     """Store a frame: positions, headings, speeds into ``xy`` (N, F, 2), ``yaw`` and ``speed`` (N, F) at ``frame``.
 
-    Headings follow the velocities smoothed in place in ``smooth`` (an EMA of ``weight``) and are held
-    (``heading``, updated in place) while that is slower than ``stand_speed``.
+    Headings (``heading``, updated in place) follow the velocities smoothed in place in ``smooth`` (an
+    EMA of ``HEADING_SMOOTHING``) and are held while that is slower than ``STAND_SPEED``; someone with a
+    point to face (``face`` (N, 2), nan for none) turns toward it by at most ``max_turn`` rad instead.
     """
     for i in range(len(vel)):
-        smooth[i, 0] = (1 - weight) * smooth[i, 0] + weight * vel[i, 0]
-        smooth[i, 1] = (1 - weight) * smooth[i, 1] + weight * vel[i, 1]
-        if np.hypot(smooth[i, 0], smooth[i, 1]) > stand_speed:
+        smooth[i, 0] = (1 - HEADING_SMOOTHING) * smooth[i, 0] + HEADING_SMOOTHING * vel[i, 0]
+        smooth[i, 1] = (1 - HEADING_SMOOTHING) * smooth[i, 1] + HEADING_SMOOTHING * vel[i, 1]
+        if not np.isnan(face[i, 0]):
+            want = np.arctan2(face[i, 1] - pos[i, 1], face[i, 0] - pos[i, 0])
+            delta = (want - heading[i] + np.pi) % (2 * np.pi) - np.pi
+            heading[i] = (heading[i] + min(max(delta, -max_turn), max_turn) + np.pi) % (2 * np.pi) - np.pi
+        elif np.hypot(smooth[i, 0], smooth[i, 1]) > STAND_SPEED:
             heading[i] = np.arctan2(smooth[i, 1], smooth[i, 0])
         xy[i, frame, 0], xy[i, frame, 1] = pos[i, 0], pos[i, 1]
         yaw[i, frame], speed[i, frame] = heading[i], np.hypot(vel[i, 0], vel[i, 1])

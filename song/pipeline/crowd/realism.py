@@ -13,6 +13,9 @@ measured. With ``MOVING_MPS`` = 0.2 m/s as the walking threshold:
   0.8 m per class, and the share of all such pairs passing closer than 0.6 m;
 - **tortuosity**: path length over displacement in 5 s windows of walking (displacement ≥ 1 m);
 - **acceleration RMS** over moving samples (finite differences of the resampled velocity).
+
+SONG's crowds also know what people stand at: :func:`stop_facing` measures how far from their
+object pedestrians face while standing at it (no real reference: the annotations have no objects).
 """
 
 from __future__ import annotations
@@ -189,3 +192,47 @@ def read_obsmat(path: str | Path) -> list[Track]:
         rows = rows[np.argsort(rows[:, 0])]
         tracks.append(Track(rows[:, 0] / step / RATE_HZ, rows[:, [2, 4]]))
     return tracks
+
+
+def _toward_outline(outline: np.ndarray, point: np.ndarray) -> float:
+    """Direction (rad) from ``point`` to the nearest point of the closed ``outline`` (K, 2)."""
+    a, b = outline, np.roll(outline, -1, axis=0)
+    s = np.clip(((point - a) * (b - a)).sum(-1) / np.maximum(((b - a) ** 2).sum(-1), 1e-12), 0.0, 1.0)
+    near = a + s[:, None] * (b - a)
+    q = near[np.argmin(np.hypot(*(near - point).T))]
+    return float(np.arctan2(q[1] - point[1], q[0] - point[0]))
+
+
+def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_stay_s: float = 4.0) -> list[float]:
+    """How far (deg) from its object each pedestrian faces while standing at it, one value per stay.
+
+    A stay: at least ``min_stay_s`` standing (< 0.01 m/s) within 0.5 m of an intent's start or 0.3 m of
+    a leg's goal; measured after its first ``settle_s`` (a turn on the spot) as the median |yaw −
+    direction to the nearest point of the object's outline|.
+
+    Args:
+        crowd: the scene's crowd table (:func:`song.datasets.run.read_crowd`).
+        intents: the scene's intents (``start_object``, ``start_xy``, ``route()``).
+        objects: scene objects by id (``footprint``).
+        settle_s: seconds of each stay left out at its start, s.
+        min_stay_s: shorter stays are not measured, s.
+    """
+    by_id = {i.id: i for i in intents}
+    out = []
+    for k, pid in enumerate(crowd.ids):
+        intent = by_id[int(pid)]
+        stays = [(intent.start_object, intent.start_xy, 0.5)] + [
+            (g.goal_object, g.goal_xy, 0.3) for g in intent.route()
+        ]
+        for oid, spot, near in stays:
+            if oid not in objects:
+                continue
+            at = (np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & (crowd.speed[k] < 0.01)
+            frames = np.flatnonzero(at)
+            if len(frames) < min_stay_s * crowd.fps:
+                continue
+            settled = frames[frames >= frames[0] + settle_s * crowd.fps]
+            want = _toward_outline(np.asarray(objects[oid].footprint), crowd.xy[k, settled].mean(axis=0))
+            miss = np.abs((crowd.yaw[k, settled] - want + np.pi) % (2 * np.pi) - np.pi)
+            out.append(float(np.degrees(np.median(miss))))
+    return out

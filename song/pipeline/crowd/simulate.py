@@ -63,8 +63,9 @@ def _length(v: np.ndarray) -> np.ndarray:
 
 YIELD_S, MAX_YIELDS = 3.0, 2  # a pedestrian still stalled after its replan stands aside this long, this often
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
-HEADING_SMOOTHING = 0.15  # EMA weight of the newest velocity in the heading estimate
-STAND_SPEED = 0.05  # m/s: below this the heading is held
+# standing at an object (before departure, dwelling, after the last leg) a pedestrian turns to face it at this
+# rate: a quarter turn on the spot in about a second (in-place turns of 90-180° take 1-2 s; Hase & Stein 1999)
+FACE_TURN_RATE = np.pi / 2
 ASIDE_M, ASIDE_DIRECTIONS = 0.7, 12  # how far, and among how many directions, someone steps aside
 ASIDE_SCAN_M = 4.0  # a yielding walker steps out of the ways of the walkers this close
 OVERLAP_PASSES = 3
@@ -119,10 +120,12 @@ class _Walkers:
     yields: np.ndarray  # (N,) int: how often it has yielded
     heading: np.ndarray  # (N,) rad
     smooth: np.ndarray  # (N, 2) smoothed velocity, m/s
-    stops: list[list[tuple[np.ndarray, float, bool]]]  # per pedestrian: legs' goals (on the mesh), dwells, step aside?
+    # per pedestrian: legs' goals (on the mesh), dwells, step aside?, the outline of the object there (or None)
+    stops: list[list[tuple[np.ndarray, float, bool, np.ndarray | None]]]
     leg: np.ndarray  # (N,) int: the leg being walked
     dwell_until: np.ndarray  # (N,) s: standing at an intermediate stop until then
     influence: np.ndarray  # (N,) first frame in which this pedestrian changed anyone else's step (inf: none yet)
+    face: np.ndarray  # (N, 2) the point a pedestrian standing at an object turns to (nan: none, or walking), m
 
 
 def _snapshot(w: _Walkers) -> _Walkers:
@@ -185,11 +188,23 @@ def _plan(mesh: Navmesh, start: np.ndarray, goal: np.ndarray) -> np.ndarray | No
     return res.points[1:] if len(res.points) > 1 else res.points
 
 
-def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.ndarray):
+def _nearest_on_outline(outline: np.ndarray | None, point: np.ndarray) -> np.ndarray:
+    """The point of a closed outline (K, 2) nearest ``point`` (2,), m; nan when there is no outline."""
+    if outline is None or not len(outline):
+        return np.full(2, np.nan)
+    a, b = outline, np.roll(outline, -1, axis=0)
+    ab = b - a
+    s = np.clip(((point - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    near = a + s[:, None] * ab
+    return near[int(np.argmin(_length(near - point)))]
+
+
+def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.ndarray, outlines: dict[str, np.ndarray]):
     """Snapped, jittered starts; every leg's goal snapped; first paths. Returns (walkers, failures {index: reason}).
 
     ``jitter`` (N, 2) m: each pedestrian's own start offset (drawn once per intent, so whom else the
-    crowd keeps never changes it).
+    crowd keeps never changes it). ``outlines``: object footprints by id; someone standing at its start
+    object or at a leg's faces the nearest point of its outline.
     """
     n = len(intents)
     raw = np.array([i.start_xy for i in intents], dtype=np.float64).reshape(n, 2)
@@ -198,7 +213,9 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
     stops, failures = [], {}
     for k, route in enumerate(routes):
         goals, gtri, _ = mesh.snap(np.array([leg.goal_xy for leg in route], dtype=np.float64), MAX_SNAP_M)
-        stops.append([(goals[j], float(leg.dwell_s), False) for j, leg in enumerate(route)])
+        stops.append(
+            [(goals[j], float(leg.dwell_s), False, outlines.get(leg.goal_object)) for j, leg in enumerate(route)]
+        )
         if (gtri < 0).any():
             failures[k] = f"goal of leg {int(np.argmax(gtri < 0)) + 1} is more than {MAX_SNAP_M} m off the navmesh"
         elif tri[k] >= 0 and len({int(mesh.component[t]) for t in [tri[k], *gtri]}) > 1:
@@ -219,7 +236,10 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         if k not in failures and j not in failures:
             failures[int(k)] = f"start overlaps pedestrian {intents[int(j)].id}"
     first = np.array([p[0] for p in paths]).reshape(n, 2)
-    heading = np.arctan2(first[:, 1] - pos[:, 1], first[:, 0] - pos[:, 0])
+    face = np.array([_nearest_on_outline(outlines.get(i.start_object), pos[k]) for k, i in enumerate(intents)])
+    face = face.reshape(n, 2)
+    toward = np.where(np.isnan(face), first, face)  # standing at its start object, or facing its way
+    heading = np.arctan2(toward[:, 1] - pos[:, 1], toward[:, 0] - pos[:, 0])
     depart = np.array([i.depart_time for i in intents], dtype=np.float64)
     w = _Walkers(
         pos=pos,
@@ -247,6 +267,7 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         leg=np.zeros(n, dtype=np.int64),
         dwell_until=np.zeros(n),
         influence=np.full(n, np.inf),
+        face=face,
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
@@ -300,7 +321,7 @@ def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: 
         score = -_length(spots - w.pos[k])
     spot = spots[int(np.argmax(score))]
     leg = int(w.leg[k])
-    w.stops[k].insert(leg, (spot, YIELD_S, True))
+    w.stops[k].insert(leg, (spot, YIELD_S, True, None))
     w.goal[k] = spot
     _set_path(w, k, spot[None].copy())
     w.best[k], w.last_progress[k] = _remaining(w, np.array([k]))[0], t
@@ -364,6 +385,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
     )
     for k in done:
         aside = w.stops[k][w.leg[k]][2]
+        w.face[k] = _nearest_on_outline(w.stops[k][w.leg[k]][3], w.pos[k])
         if not _next_leg(w, mesh, int(k), t):
             w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
             w.arrival[k] = t
@@ -373,6 +395,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
     for k in stalled:
         if _length(w.goal[k] - w.pos[k]) < CLOSE_ENOUGH_M:  # held a step from its spot: it stops where it is
             w.goal[k] = w.pos[k].copy()
+            w.face[k] = _nearest_on_outline(w.stops[k][w.leg[k]][3], w.pos[k])
             if not _next_leg(w, mesh, int(k), t):
                 w.arrived[k] = True
                 w.arrival[k] = t
@@ -439,7 +462,7 @@ def _make_room(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: f
         if not len(spots):
             continue
         spot = spots[int(np.argmax(clearance(spots)))]
-        w.stops[j].append((spot, 0.0, True))
+        w.stops[j].append((spot, 0.0, True, None))
         w.leg[j] = len(w.stops[j]) - 1
         w.goal[j] = spot
         w.arrived[j], w.arrival[j] = False, np.nan
@@ -493,6 +516,7 @@ class _Run:
             frame = self.frame + 1
             t = frame / cfg.fps
             moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
+            w.face[moving] = np.nan  # it has left its object
             _step_frame(w, self.mesh, self.avoid, moving, cfg, frame)
             failed = _check_progress(w, self.mesh, moving, frame, cfg)
             if failed:
@@ -502,9 +526,8 @@ class _Run:
 
     def _record(self, frame: int) -> None:
         w = self.w
-        record_frame(
-            w.pos, w.vel, w.smooth, w.heading, HEADING_SMOOTHING, STAND_SPEED, self.xy, self.yaw, self.speed, frame
-        )
+        turn = FACE_TURN_RATE / self.cfg.fps
+        record_frame(w.pos, w.vel, w.smooth, w.heading, w.face, turn, self.xy, self.yaw, self.speed, frame)
         self.frame = frame
         if frame % SNAPSHOT_EVERY == 0:
             self.snapshots.append((frame, _snapshot(w)))
@@ -543,6 +566,7 @@ def plan_crowd(
     cfg: CrowdConfig,
     rng: np.random.Generator,
     rollback: bool = True,
+    outlines: dict[str, np.ndarray] | None = None,
 ) -> CrowdPlan:
     """Simulate all pedestrians jointly; those that cannot be planned are removed with a reason.
 
@@ -556,6 +580,9 @@ def plan_crowd(
             ends (:class:`_Run`); False re-simulates everyone from t = 0 after each removal instead
             (the plain reference the tests and ``benchmarks/crowd_density.py`` compare with). Either
             way the kept pedestrians' tracks are those of a fresh run of them alone.
+        outlines: footprints (K, 2) of the scene's objects by id: someone standing at its start object
+            or at a stop turns to face the nearest point of that object's outline (a person waits at a
+            counter facing it); without one it keeps the heading it arrived with.
     """
     jitter = _jitter(intents, cfg, rng)
     kept = np.arange(len(intents))
@@ -569,7 +596,7 @@ def plan_crowd(
     def start() -> _Run | None:
         nonlocal kept
         while len(kept):
-            w, failures = _start([intents[k] for k in kept], mesh, cfg, jitter[kept])
+            w, failures = _start([intents[k] for k in kept], mesh, cfg, jitter[kept], outlines or {})
             if not failures:
                 return _Run(w, mesh, avoid, cfg)
             kept = kept[~drop(failures)]

@@ -5,6 +5,8 @@ The files' contracts live in :mod:`song.datasets.run` (the crowd table's columns
 
 from __future__ import annotations
 
+import numpy as np
+
 from song.datasets.run import SceneFolder, crowd_table, read_intents, write_crowd, write_crowd_status
 from song.datasets.run.layout import CROWD_FILE, CROWD_STATUS_FILE, NAVMESH_FILE
 from song.pipeline.chain import StageContext, StageOutput
@@ -24,7 +26,8 @@ def run_crowd(ctx: StageContext) -> StageOutput:
     intents = read_intents(scene.intents)
     cfg = ctx.config.crowd
     mesh = scene_navmesh(ctx.scene, cfg.agent_radius_m, cfg.contour_error_m)
-    plan = plan_crowd(intents.intents, mesh, make_avoidance(mesh, cfg), cfg, ctx.rng("crowd"))
+    outlines = {obj.id: np.asarray(obj.footprint, dtype=np.float64) for obj in ctx.scene.semantic_map.objects}
+    plan = plan_crowd(intents.intents, mesh, make_avoidance(mesh, cfg), cfg, ctx.rng("crowd"), outlines=outlines)
     table = plan_table(plan)
     save_navmesh(scene.navmesh, mesh)
     write_crowd(scene.crowd, table)

@@ -13,6 +13,7 @@ from song.datasets.run import read_crowd, read_intents
 from song.datasets.scenes import load_scene_package
 from song.pipeline.chain import iter_run
 from song.pipeline.crowd import load_navmesh
+from song.pipeline.crowd.realism import stop_facing
 from song.pipeline.intents.navigation import walkable
 from tests.conftest import SAMPLES
 
@@ -79,3 +80,12 @@ def test_routine_chains_are_valid(sample_run: Path, scene: str) -> None:
     d = np.linalg.norm(np.array(spots)[:, None] - np.array(spots)[None], axis=-1) + np.eye(len(spots)) * 9
     assert d.min() >= cfg.min_spawn_separation_m - 1e-6  # nobody's standing spot is another's
     assert sum(len(i.route()) > 1 for i in intents) >= len(intents) // 2  # routines, not single walks
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_pedestrians_face_the_object_they_stand_at(sample_run: Path, scene: str) -> None:
+    """At a stop (dwelling or done) and before departing, a pedestrian faces the nearest side of its object."""
+    scene_dir = sample_run / "scenes" / scene
+    objects = load_scene_package(SAMPLES / scene).semantic_map.object_by_id()
+    misses = stop_facing(read_crowd(scene_dir), read_intents(scene_dir / "intents.json").intents, objects)
+    assert misses and max(misses) < 5.0, misses
