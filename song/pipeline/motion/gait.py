@@ -41,8 +41,9 @@ from song.geometry.fk import global_to_local
 from song.geometry.ik import two_bone_ik
 from song.geometry.rotations import matrix_to_quat, quat_slerp, quat_to_matrix, rot_x, rot_y, rot_z, wrap_angle
 from song.geometry.skeleton import JOINT_INDEX as J
-from song.geometry.skeleton import rest_joints
-from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw
+from song.geometry.skeleton import PARENTS, rest_joints
+from song.pipeline.motion.postures import EDGE_CLEAR_M, LIFT_CLEAR_M, ONTO_SURFACE_M, PALM_M, arm_on_surface, arm_to
+from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw, rate_limited
 
 # Walk ratio (step length / step frequency) is constant per person across speeds, 0.34-0.42 m·s in adults
 # around 0.38, and grows with body height (Sekiya & Nagasaki 1998, Gait Posture 7:225): the configured walk
@@ -97,6 +98,14 @@ SWING_PITCH = (0.05, 0.6)  # the foot turns from toe-down (toe-off) to toe-up (h
 # Shoulder swing amplitude a + b·v degrees (scaled per person by 0.75-1.25): ±10-25° at 1.0-1.4 m/s, growing
 # with speed (Murray et al. 1967, J. Bone Joint Surg. 49A:336; Collins et al. 2009, Proc. R. Soc. B 276:3679).
 ARM_SWING_DEG = (6.0, 10.0)
+_CHAIN = {  # the joints from the pelvis to each shoulder, in order
+    side: [J["spine1"], J["spine2"], J["spine3"], J[f"{side}_collar"], J[f"{side}_shoulder"]]
+    for side in ("left", "right")
+}
+ARM_HANG_DEG = 82.0  # the arms hang this far down from the T-pose (8° out from the body)
+HANDS_ITERATIONS = 2  # corrections of the hands' planar solve by where the arm really puts them
+HANDS_RAMP_S = 1.0  # the arms move onto a counter, desk or table, and off it, over about this long
+HANDS_LEAN_DEG, HANDS_HEAD_DEG = 5.0, 12.0  # resting the hands there, the trunk leans and the head looks down
 # Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
 # trunk and the pelvis (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999, Exp. Brain Res. 129:629).
 HEAD_LEAD_S, TRUNK_LEAD_S, PELVIS_LEAD_S = 0.25, 0.2, 0.15
@@ -284,6 +293,93 @@ class _Body:
         # the hip-ankle distance of the rest pose: the skeleton's knee is slightly bent at rest, so a leg
         # stretched farther than this would bend the knee backwards (knee flexion is measured from rest)
         self.leg = float(np.linalg.norm(r[J["left_ankle"]] - r[J["left_hip"]]))
+        self.shoulder = r[J["left_shoulder"], [0, 2]]  # forward offset and height of the shoulder, standing
+        self.upper_arm = float(np.linalg.norm(r[J["left_elbow"]] - r[J["left_shoulder"]]))
+        self.forearm = float(np.linalg.norm(r[J["left_hand"]] - r[J["left_elbow"]]))
+
+    def hands_on_surface(self, traj: Trajectory, idle: np.ndarray, lean: float) -> np.ndarray:
+        """How much (0-1) the body leans to rest its hands on a counter, desk or table per frame.
+
+        Where the standing body, its trunk pitched forward by ``lean`` (rad) from the pelvis up as the
+        gait pitches it, can reach the surface of ``traj.surface``
+        (:func:`song.pipeline.motion.postures.arm_on_surface`); ramped on and off over ``HANDS_RAMP_S``.
+        """
+        if traj.surface is None:
+            return np.zeros(traj.n_frames)
+        r, point = self.rest, self.rest[0].copy()
+        for joint in _CHAIN["left"]:  # spine1..3 take 1/3, 2/3 and all of the chest's pitch
+            parent = PARENTS[joint]
+            share = {J["spine1"]: 0.0, J["spine2"]: 1 / 3, J["spine3"]: 2 / 3}.get(parent, 1.0)
+            point = point + rot_y(np.array([share * lean]))[0] @ (r[joint] - r[parent])
+        _, _, possible = arm_on_surface(*traj.surface.T, point[[0, 2]], self.upper_arm, self.forearm)
+        return gaussian_filter1d(possible.astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps, mode="nearest") * idle
+
+
+def _arm(rot_chest: np.ndarray, swing: np.ndarray, flex: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
+    """Global shoulder and elbow rotations ``(T, 3, 3)``: the arm hangs ``ARM_HANG_DEG``, swung and bent forward."""
+    shoulder = rot_chest @ rot_y(-swing) @ rot_x(np.full(len(swing), sign * np.radians(ARM_HANG_DEG)))
+    return shoulder, shoulder @ rot_z(sign * flex)
+
+
+def _held(values: np.ndarray) -> np.ndarray:
+    """``values`` (T, K) with nan rows replaced by the nearest earlier finite row (the first one before it)."""
+    ok = np.isfinite(values[:, 0])
+    if not ok.any():
+        return values
+    last = np.maximum.accumulate(np.where(ok, np.arange(len(ok)), -1))
+    return values[np.where(last >= 0, last, np.argmax(ok))]
+
+
+def _hands_on(
+    traj: Trajectory, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray, side: str,
+    sign: float, hold: np.ndarray, base_flex: float,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Shoulder flexion and elbow flexion (rad) of one arm, its hand going onto ``traj.surface`` by ``hold``.
+
+    The hand follows a path in the sagittal plane as ``hold`` goes 0 → 1: from where it hangs up to
+    ``LIFT_CLEAR_M`` above the top, ``EDGE_CLEAR_M`` short of the edge, then forward onto the surface
+    (leaving, back the same way), so it never passes through the edge. At every frame a planar
+    two-bone solve (:func:`song.pipeline.motion.postures.arm_to`) from where the shoulder is in this pose
+    (``glob`` holds the pelvis, spine and collar rotations: the trunk's lean is included), corrected
+    ``HANDS_ITERATIONS`` times by where the arm, hanging slightly out to the side, really puts the hand.
+    Where the surface is out of reach the arm hangs as it would.
+    """
+    rest, n = body.rest, traj.n_frames
+    shoulder = pelvis.copy()
+    for joint in _CHAIN[side]:  # the shoulder's ancestors, pelvis first
+        parent = PARENTS[joint]
+        shoulder += np.einsum("tij,j->ti", glob[:, parent], rest[joint] - rest[parent])
+    forward = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+    upper = rest[J[f"{side}_elbow"]] - rest[J[f"{side}_shoulder"]]
+    fore = rest[J[f"{side}_hand"]] - rest[J[f"{side}_elbow"]]
+    chest = glob[:, J["spine3"]]
+
+    def hand_at(swing: np.ndarray, flex: np.ndarray) -> np.ndarray:  # (T, 2): forward of the plan, height
+        rot_s, rot_e = _arm(chest, swing, flex, sign)
+        hand = shoulder + np.einsum("tij,j->ti", rot_s, upper) + np.einsum("tij,j->ti", rot_e, fore)
+        return np.stack([((hand[:, :2] - traj.xy) * forward).sum(-1), hand[:, 2]], axis=-1)
+
+    def solve(target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        aim = target.copy()
+        for _ in range(HANDS_ITERATIONS):
+            flex_s, flex_e, possible = arm_to(*aim.T, local, body.upper_arm, body.forearm)
+            aim = aim - np.where(possible[:, None], hand_at(flex_s, flex_e) - target, 0.0)
+        return arm_to(*aim.T, local, body.upper_arm, body.forearm)
+
+    local = np.stack([((shoulder[:, :2] - traj.xy) * forward).sum(-1), shoulder[:, 2]], axis=-1)
+    end = _held(traj.surface) + np.array([ONTO_SURFACE_M, PALM_M])
+    ramp = np.minimum(hold, gaussian_filter1d(solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps))
+    ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * traj.fps))  # the last turning step ends at once
+    hanging = hand_at(np.zeros(n), np.full(n, base_flex))
+    lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] - ONTO_SURFACE_M - EDGE_CLEAR_M),
+                     end[:, 1] + LIFT_CLEAR_M], axis=-1)  # fmt: skip
+    up, over = _smoothstep(np.clip(2.0 * ramp, 0.0, 1.0)), _smoothstep(np.clip(2.0 * ramp - 1.0, 0.0, 1.0))
+    path = np.where(
+        (ramp < 0.5)[:, None], hanging + up[:, None] * (lift - hanging), lift + over[:, None] * (end - lift)
+    )
+    flex_s, flex_e, possible = solve(path)
+    w = np.where(possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 0.0)  # from the hanging arm's own angles
+    return w * flex_s, (1.0 - w) * base_flex + w * flex_e
 
 
 def _foot_poses(
@@ -471,24 +567,28 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         glob[:, J[foot_name]] = rot_foot
 
     # trunk, head, arms
+    on_surface = body.hands_on_surface(traj, idle, 0.5 * lean + np.radians(HANDS_LEAN_DEG))
     chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
+    chest_pitch = chest_pitch + on_surface * np.radians(HANDS_LEAN_DEG)
     rot_chest = rot_z(_ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
     for name, w in (("spine1", 1 / 3), ("spine2", 2 / 3)):
         glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
     glob[:, J["spine3"]] = rot_chest
     look = _ahead(heading, t, HEAD_LEAD_S) + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
-    rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(np.full(n, np.radians(style.head_pitch_deg)))
+    head_pitch = np.radians(style.head_pitch_deg) + on_surface * np.radians(HANDS_HEAD_DEG)
+    rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(head_pitch)
     glob[:, J["head"]] = rot_head
     glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)
     glob[:, J["left_collar"]] = rot_chest
     glob[:, J["right_collar"]] = rot_chest
     amplitude = np.radians(style.arm_swing * (ARM_SWING_DEG[0] + ARM_SWING_DEG[1] * np.clip(speed, 0.0, 1.5)))
     swing_left = walk * amplitude * np.cos(np.pi * (phase - 1.8))
-    hang = np.radians(82.0)
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
-        shoulder = rot_chest @ rot_y(-swing) @ rot_x(np.full(n, sign * hang))
-        flex = np.radians(style.elbow_flex_deg) + 0.5 * np.maximum(swing, 0.0)
-        elbow = shoulder @ rot_z(sign * flex)
+        on_shoulder, flex = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg))
+        if on_surface.any():
+            on_shoulder, flex = _hands_on(traj, body, glob, pelvis, heading, prefix, sign, on_surface, flex[0])
+        flex = flex + 0.5 * np.maximum(swing, 0.0)
+        shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
         glob[:, J[f"{prefix}_shoulder"]] = shoulder
         glob[:, J[f"{prefix}_elbow"]] = elbow
         glob[:, J[f"{prefix}_wrist"]] = elbow

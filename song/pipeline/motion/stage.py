@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,7 @@ from song.pipeline.motion.amass import HAND_SLOTS, pelvis_j0
 from song.pipeline.motion.generators import MotionGenerator, ProceduralGait, make_generator
 from song.pipeline.motion.io import MOTION_FORMAT, MOTION_VERSION, write_motion
 from song.pipeline.motion.postprocess import postprocess
+from song.pipeline.motion.postures import STAY_NEAR_M, surface_track
 from song.pipeline.motion.quality import motion_quality
 from song.pipeline.motion.types import Motion, Trajectory
 
@@ -53,13 +55,30 @@ def read_trajectories(path: str | Path) -> list[Trajectory]:
     return out
 
 
-def _activities(scene: SceneFolder, ids: list[int]) -> list[str]:
-    """Each pedestrian's activity from ``intents.json`` ("" when the file or the pedestrian is missing)."""
+def _intents_by_id(scene: SceneFolder) -> dict:
+    """The scene's intents by pedestrian id (empty when ``intents.json`` is missing or unreadable)."""
     try:
-        by_id = read_intents(scene.intents).by_id()
+        return read_intents(scene.intents).by_id()
     except SongError:
-        by_id = {}
-    return [by_id[i].activity if i in by_id else "" for i in ids]
+        return {}
+
+
+def with_surfaces(trajectories: list[Trajectory], intents: dict, objects: dict) -> list[Trajectory]:
+    """The trajectories with the counters, desks and tables their pedestrians rest their hands on.
+
+    Stops: the intent's start object (within 0.5 m of its start: the crowd jitters starts) and each
+    leg's object (within ``STAY_NEAR_M`` of its goal); see :func:`song.pipeline.motion.postures.surface_track`.
+    """
+    out = []
+    for traj in trajectories:
+        intent = intents.get(traj.ped_id)
+        surface = None
+        if intent is not None:
+            stops = [(intent.start_object, intent.start_xy, 0.5)]
+            stops += [(leg.goal_object, leg.goal_xy, STAY_NEAR_M) for leg in intent.route()]
+            surface = surface_track(traj.xy, traj.speed, traj.fps, stops, objects)
+        out.append(traj if surface is None else replace(traj, surface=surface))
+    return out
 
 
 def _meta(motion: Motion, traj: Trajectory, alignment: dict, quality: dict, generator: dict) -> dict[str, Any]:
@@ -143,7 +162,10 @@ def run_motion(ctx: StageContext) -> list[str]:
     trajectories = read_trajectories(scene.crowd)
     ids = [traj.ped_id for traj in trajectories]
     seeds = [int(ctx.rng(ped_id).integers(0, 2**63 - 1)) for ped_id in ids]
-    results = synthesize_motions(trajectories, _activities(scene, ids), seeds, cfg)
+    intents = _intents_by_id(scene)
+    trajectories = with_surfaces(trajectories, intents, ctx.scene.semantic_map.object_by_id())
+    activities = [intents[i].activity if i in intents else "" for i in ids]
+    results = synthesize_motions(trajectories, activities, seeds, cfg)
     keep = {traj_dir_name(i) for i in ids}
     if scene.amass_dir.exists():
         for stale in scene.amass_dir.glob("traj_*"):

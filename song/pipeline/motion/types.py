@@ -30,6 +30,12 @@ def _rate_limited(values: np.ndarray, steps: np.ndarray) -> np.ndarray:  # pragm
     return 0.5 * (forward + backward)
 
 
+def rate_limited(values: np.ndarray, max_step: float) -> np.ndarray:
+    """``values`` (T,) changing by at most ``max_step`` per sample; a jump becomes a ramp centred on it."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    return _rate_limited(values, np.full(max(len(values) - 1, 0), float(max_step)))
+
+
 def body_heading(yaw: np.ndarray, t: np.ndarray, max_rate: float = MAX_TURN_RATE) -> np.ndarray:
     """Unwrapped body heading ``(T,)`` radians that follows the planned yaw at a bounded turn rate.
 
@@ -54,6 +60,9 @@ class Trajectory:
         xy: ``(T, 2)`` float64 world positions, metres.
         yaw: ``(T,)`` float64 heading, radians CCW from +x.
         speed: ``(T,)`` float64 planned speed, m/s.
+        surface: ``(T, 2)`` float64 [horizontal distance to its edge m, height m] of a counter, desk
+            or table the pedestrian rests its hands on at that frame, nan elsewhere; None: never
+            (:mod:`song.pipeline.motion.postures`; generators may ignore it).
     """
 
     ped_id: int
@@ -62,6 +71,7 @@ class Trajectory:
     xy: np.ndarray
     yaw: np.ndarray
     speed: np.ndarray
+    surface: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -71,6 +81,8 @@ class Trajectory:
             raise InputError(CROWD_FILE, f"ped_id={self.ped_id}.t", "times must be strictly increasing")
         if not (np.all(np.isfinite(self.xy)) and np.all(np.isfinite(self.yaw))):
             raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", "non-finite x, y or yaw")
+        if self.surface is not None and self.surface.shape != (n, 2):
+            raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", "surface must be (T, 2)")
 
     @property
     def n_frames(self) -> int:

@@ -1,0 +1,101 @@
+"""Hands resting on counters, desks and tables: the planar arm solve, the gait's posture, the stage's stays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from song.config import MotionConfig
+from song.datasets.scenes.model import SceneObject
+from song.geometry.skeleton import JOINT_INDEX as J
+from song.pipeline.motion.gait import generate_gait, style_for
+from song.pipeline.motion.postures import ONTO_SURFACE_M, PALM_M, arm_on_surface, is_surface, surface_track
+from song.pipeline.motion.types import Trajectory
+
+FPS = 30
+
+
+def test_planar_arm_solve_puts_the_hand_on_target_or_declines() -> None:
+    # close to a high counter (the upper arm back), a mid one, farther and higher, and one out of reach
+    edge, height = np.array([0.25, 0.3, 0.35, 0.9]), np.array([1.1, 1.0, 1.05, 1.0])
+    shoulder, upper, fore = np.array([0.02, 1.43]), 0.29, 0.34
+    flex_s, flex_e, possible = arm_on_surface(edge, height, shoulder, upper, fore)
+    np.testing.assert_array_equal(possible, [True, True, True, False])
+    assert flex_s[0] < 0 < flex_s[1]
+    # forward kinematics of the two planar links from the shoulder (angles from straight down)
+    hand_x = shoulder[0] + upper * np.sin(flex_s) + fore * np.sin(flex_s + flex_e)
+    hand_z = shoulder[1] - upper * np.cos(flex_s) - fore * np.cos(flex_s + flex_e)
+    np.testing.assert_allclose(hand_x[possible], (edge + ONTO_SURFACE_M)[possible], atol=1e-9)
+    np.testing.assert_allclose(hand_z[possible], (height + PALM_M)[possible], atol=1e-9)
+    assert (flex_e[possible] > 0).all() and (flex_s[~possible] == 0).all()
+
+
+def _standing(surface: np.ndarray) -> Trajectory:
+    n = len(surface)
+    return Trajectory(0, np.arange(n) / FPS, np.arange(n, dtype=np.int32), np.zeros((n, 2)), np.zeros(n), np.zeros(n),
+                      surface)  # fmt: skip
+
+
+@pytest.mark.parametrize(("edge", "height"), [(0.2, 1.0), (0.35, 1.0), (0.3, 1.15), (0.25, 0.9)])
+def test_gait_rests_both_hands_on_a_reachable_surface_and_clears_its_edge(edge: float, height: float) -> None:
+    n = 240
+    surface = np.full((n, 2), np.nan)
+    surface[60:180] = (edge, height)
+    rested = 0
+    for seed in range(5):
+        motion = generate_gait(_standing(surface), style_for(seed, MotionConfig()))
+        joints = motion.joints
+        hands = joints[:, [J["left_hand"], J["right_hand"]]]
+        if np.abs(hands[120, :, 2] - height - PALM_M).max() < 0.005:  # this body reaches it
+            rested += 1
+            np.testing.assert_allclose(hands[90:150, :, 0], edge + ONTO_SURFACE_M, atol=0.005)
+            np.testing.assert_allclose(hands[90:150, :, 2], height + PALM_M, atol=0.005)
+        beyond = hands[..., 0] > edge + 0.005  # over the surface: the mid-palm stays above its top
+        assert (hands[..., 2][beyond] >= height + 0.01).all()
+        assert (hands[:30, :, 2] < 0.95).all() and (hands[-20:, :, 2] < 0.95).all()  # arms down before and after
+    assert rested >= 3
+
+
+def test_counter_stays_become_surface_frames_only_at_surfaces() -> None:
+    square = [(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)]
+    objects = {
+        "counter_1": SceneObject(id="counter_1", label="counter", category="furniture", footprint=square, z_max=1.0),
+        "shelf_1": SceneObject(id="shelf_1", label="shelf", category="furniture", footprint=square, z_max=1.8),
+        "desk_low": SceneObject(id="desk_low", label="desk", category="furniture", footprint=square, z_max=0.5),
+    }
+    assert [is_surface(o) for o in objects.values()] == [True, False, False]
+    n = 300
+    xy = np.zeros((n, 2))
+    xy[:, 0] = np.clip(np.arange(n) / FPS * 0.5, 0.0, 0.7)  # walks to 0.7 m, 0.3 m short of the counter, stays
+    speed = np.r_[np.full(42, 0.5), np.zeros(n - 42)]
+    track = surface_track(xy, speed, FPS, [("counter_1", (0.7, 0.0), 0.3)], objects)
+    held = np.isfinite(track[:, 0])
+    assert held[100:250].all() and not held[:42].any() and not held[-10:].any()  # settled first, off before the end
+    np.testing.assert_allclose(track[held], [[0.3, 1.0]] * int(held.sum()))
+    assert surface_track(xy, speed, FPS, [("shelf_1", (0.7, 0.0), 0.3), ("desk_low", (0.7, 0.0), 0.3)], objects) is None
+
+
+def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
+    """On the sample scenes' crowds, pedestrians at reachable counters put both hands on them, and only there."""
+    from song.datasets.run import SceneFolder, read_intents
+    from song.datasets.scenes import load_scene_package
+    from song.pipeline.motion.stage import read_trajectories, with_surfaces
+    from tests.conftest import SAMPLES
+
+    rested = 0
+    for scene in sorted((sample_run / "scenes").iterdir()):
+        folder = SceneFolder(scene)
+        objects = load_scene_package(SAMPLES / scene.name).semantic_map.object_by_id()
+        trajectories = with_surfaces(read_trajectories(folder.crowd), read_intents(folder.intents).by_id(), objects)
+        for traj in trajectories:
+            if traj.surface is None:
+                continue
+            held = np.isfinite(traj.surface[:, 0])
+            assert (traj.speed[held] < 0.01).all()  # only while standing
+            motion = generate_gait(traj, style_for(traj.ped_id, MotionConfig()))
+            joints = motion.joints
+            for f in np.flatnonzero(held)[:: 2 * FPS]:
+                hands = joints[f, [J["left_hand"], J["right_hand"]], 2]
+                if np.abs(hands - traj.surface[f, 1] - PALM_M).max() < 0.01:
+                    rested += 1
+    assert rested >= 5
