@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from song.geometry.outline import nearest_on_outline
+
 RATE_HZ = 2.5
 MOVING_MPS = 0.2
 INTERACTION_M = 2.0
@@ -194,15 +196,6 @@ def read_obsmat(path: str | Path) -> list[Track]:
     return tracks
 
 
-def _toward_outline(outline: np.ndarray, point: np.ndarray) -> float:
-    """Direction (rad) from ``point`` to the nearest point of the closed ``outline`` (K, 2)."""
-    a, b = outline, np.roll(outline, -1, axis=0)
-    s = np.clip(((point - a) * (b - a)).sum(-1) / np.maximum(((b - a) ** 2).sum(-1), 1e-12), 0.0, 1.0)
-    near = a + s[:, None] * (b - a)
-    q = near[np.argmin(np.hypot(*(near - point).T))]
-    return float(np.arctan2(q[1] - point[1], q[0] - point[0]))
-
-
 def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_stay_s: float = 4.0) -> list[float]:
     """How far (deg) from its object each pedestrian faces while standing at it, one value per stay.
 
@@ -232,7 +225,9 @@ def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_
             if len(frames) < min_stay_s * crowd.fps:
                 continue
             settled = frames[frames >= frames[0] + settle_s * crowd.fps]
-            want = _toward_outline(np.asarray(objects[oid].footprint), crowd.xy[k, settled].mean(axis=0))
+            p = crowd.xy[k, settled].mean(axis=0)
+            q = nearest_on_outline(np.asarray(objects[oid].footprint), p[None])[0][0]
+            want = np.arctan2(q[1] - p[1], q[0] - p[0])
             miss = np.abs((crowd.yaw[k, settled] - want + np.pi) % (2 * np.pi) - np.pi)
             out.append(float(np.degrees(np.median(miss))))
     return out

@@ -37,6 +37,7 @@ import numpy as np
 from song.config import CrowdConfig
 from song.datasets.run.intents import Intent
 from song.geometry.navmesh import Navmesh, carve_discs
+from song.geometry.outline import nearest_on_outline
 from song.pipeline.crowd._crowd_kernel import (
     avoidance_inputs,
     progress,
@@ -192,11 +193,7 @@ def _nearest_on_outline(outline: np.ndarray | None, point: np.ndarray) -> np.nda
     """The point of a closed outline (K, 2) nearest ``point`` (2,), m; nan when there is no outline."""
     if outline is None or not len(outline):
         return np.full(2, np.nan)
-    a, b = outline, np.roll(outline, -1, axis=0)
-    ab = b - a
-    s = np.clip(((point - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-    near = a + s[:, None] * ab
-    return near[int(np.argmin(_length(near - point)))]
+    return nearest_on_outline(outline, point[None])[0][0]
 
 
 def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.ndarray, outlines: dict[str, np.ndarray]):

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from song.geometry.outline import nearest_on_outline
+
 SURFACE_KEYWORDS = ("counter", "reception", "checkout", "desk", "help", "bar", "pharmacy", "workstation", "table")
 SURFACE_HEIGHT_M = (0.7, 1.2)  # tops between these heights take resting hands
 STAY_NEAR_M = 0.3  # within this of a leg's goal (0.5 m of the start: its jitter) a standing pedestrian is there
@@ -34,16 +36,6 @@ def is_surface(obj) -> bool:
     """The object is a counter, desk or table at standing-work height (``label``, ``category``, ``z_max``)."""
     text = f"{obj.label} {obj.category}".lower()
     return any(k in text for k in SURFACE_KEYWORDS) and SURFACE_HEIGHT_M[0] <= obj.z_max <= SURFACE_HEIGHT_M[1]
-
-
-def _edge_distance(outline: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(T,) horizontal distance from each point (T, 2) to the closed outline (K, 2), m."""
-    a, b = outline, np.roll(outline, -1, axis=0)
-    ab = b - a
-    rel = points[:, None] - a[None]
-    s = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
-    d = rel - s[..., None] * ab
-    return np.hypot(d[..., 0], d[..., 1]).min(axis=1)
 
 
 def surface_track(xy: np.ndarray, speed: np.ndarray, fps: float, stops: list, objects: dict) -> np.ndarray | None:
@@ -74,7 +66,7 @@ def surface_track(xy: np.ndarray, speed: np.ndarray, fps: float, stops: list, ob
             if hi - lo < fps:  # a stop shorter than a second of resting is left alone
                 continue
             outline = np.asarray(obj.footprint, dtype=np.float64)
-            out[lo:hi, 0] = _edge_distance(outline, xy[lo:hi])
+            out[lo:hi, 0] = nearest_on_outline(outline, xy[lo:hi])[1]
             out[lo:hi, 1] = obj.z_max
     return out if np.isfinite(out[:, 0]).any() else None
 
