@@ -104,6 +104,7 @@ _CHAIN = {  # the joints from the pelvis to each shoulder, in order
 }
 ARM_HANG_DEG = 82.0  # the arms hang this far down from the T-pose (8° out from the body)
 HANDS_ITERATIONS = 2  # corrections of the hands' planar solve by where the arm really puts them
+HANDS_INWARD_DEG = 15.0  # resting on a surface, the fingers point this far inward of straight ahead
 HANDS_RAMP_S = 1.0  # the arms move onto a counter, desk or table, and off it, over about this long
 HANDS_LEAN_DEG, HANDS_HEAD_DEG = 5.0, 12.0  # resting the hands there, the trunk leans and the head looks down
 # Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
@@ -295,7 +296,11 @@ class _Body:
         self.leg = float(np.linalg.norm(r[J["left_ankle"]] - r[J["left_hip"]]))
         self.shoulder = r[J["left_shoulder"], [0, 2]]  # forward offset and height of the shoulder, standing
         self.upper_arm = float(np.linalg.norm(r[J["left_elbow"]] - r[J["left_shoulder"]]))
-        self.forearm = float(np.linalg.norm(r[J["left_hand"]] - r[J["left_elbow"]]))
+        self.forearm = float(np.linalg.norm(r[J["left_wrist"]] - r[J["left_elbow"]]))
+        # a hand lying flat, fingers turned in by HANDS_INWARD_DEG: its mid-palm joint this far ahead of the wrist
+        self.hand_reach = float(
+            np.linalg.norm(r[J["left_hand"]] - r[J["left_wrist"]]) * np.cos(np.radians(HANDS_INWARD_DEG))
+        )
 
     def hands_on_surface(self, traj: Trajectory, idle: np.ndarray, lean: float) -> np.ndarray:
         """How much (0-1) the body leans to rest its hands on a counter, desk or table per frame.
@@ -311,7 +316,8 @@ class _Body:
             parent = PARENTS[joint]
             share = {J["spine1"]: 0.0, J["spine2"]: 1 / 3, J["spine3"]: 2 / 3}.get(parent, 1.0)
             point = point + rot_y(np.array([share * lean]))[0] @ (r[joint] - r[parent])
-        _, _, possible = arm_on_surface(*traj.surface.T, point[[0, 2]], self.upper_arm, self.forearm)
+        edge, height = traj.surface.T
+        _, _, possible = arm_on_surface(edge - self.hand_reach, height, point[[0, 2]], self.upper_arm, self.forearm)
         return gaussian_filter1d(possible.astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps, mode="nearest") * idle
 
 
@@ -333,8 +339,8 @@ def _held(values: np.ndarray) -> np.ndarray:
 def _hands_on(
     traj: Trajectory, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray, side: str,
     sign: float, hold: np.ndarray, base_flex: float,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """Shoulder flexion and elbow flexion (rad) of one arm, its hand going onto ``traj.surface`` by ``hold``.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Shoulder flexion, elbow flexion (rad) and palm turn (0-1) of one arm going onto ``traj.surface`` by ``hold``.
 
     The hand follows a path in the sagittal plane as ``hold`` goes 0 → 1: from where it hangs up to
     ``LIFT_CLEAR_M`` above the top, ``EDGE_CLEAR_M`` short of the edge, then forward onto the surface
@@ -342,7 +348,7 @@ def _hands_on(
     two-bone solve (:func:`song.pipeline.motion.postures.arm_to`) from where the shoulder is in this pose
     (``glob`` holds the pelvis, spine and collar rotations: the trunk's lean is included), corrected
     ``HANDS_ITERATIONS`` times by where the arm, hanging slightly out to the side, really puts the hand.
-    Where the surface is out of reach the arm hangs as it would.
+    The palm turns from facing the thigh to lying flat as the hand moves over the surface. Where the surface is out of reach the arm hangs as it would.
     """
     rest, n = body.rest, traj.n_frames
     shoulder = pelvis.copy()
@@ -351,10 +357,10 @@ def _hands_on(
         shoulder += np.einsum("tij,j->ti", glob[:, parent], rest[joint] - rest[parent])
     forward = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
     upper = rest[J[f"{side}_elbow"]] - rest[J[f"{side}_shoulder"]]
-    fore = rest[J[f"{side}_hand"]] - rest[J[f"{side}_elbow"]]
+    fore = rest[J[f"{side}_wrist"]] - rest[J[f"{side}_elbow"]]
     chest = glob[:, J["spine3"]]
 
-    def hand_at(swing: np.ndarray, flex: np.ndarray) -> np.ndarray:  # (T, 2): forward of the plan, height
+    def wrist_at(swing: np.ndarray, flex: np.ndarray) -> np.ndarray:  # (T, 2): forward of the plan, height
         rot_s, rot_e = _arm(chest, swing, flex, sign)
         hand = shoulder + np.einsum("tij,j->ti", rot_s, upper) + np.einsum("tij,j->ti", rot_e, fore)
         return np.stack([((hand[:, :2] - traj.xy) * forward).sum(-1), hand[:, 2]], axis=-1)
@@ -363,15 +369,15 @@ def _hands_on(
         aim = target.copy()
         for _ in range(HANDS_ITERATIONS):
             flex_s, flex_e, possible = arm_to(*aim.T, local, body.upper_arm, body.forearm)
-            aim = aim - np.where(possible[:, None], hand_at(flex_s, flex_e) - target, 0.0)
+            aim = aim - np.where(possible[:, None], wrist_at(flex_s, flex_e) - target, 0.0)
         return arm_to(*aim.T, local, body.upper_arm, body.forearm)
 
     local = np.stack([((shoulder[:, :2] - traj.xy) * forward).sum(-1), shoulder[:, 2]], axis=-1)
-    end = _held(traj.surface) + np.array([ONTO_SURFACE_M, PALM_M])
+    end = _held(traj.surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
     ramp = np.minimum(hold, gaussian_filter1d(solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps))
     ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * traj.fps))  # the last turning step ends at once
-    hanging = hand_at(np.zeros(n), np.full(n, base_flex))
-    lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] - ONTO_SURFACE_M - EDGE_CLEAR_M),
+    hanging = wrist_at(np.zeros(n), np.full(n, base_flex))
+    lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] + body.hand_reach - ONTO_SURFACE_M - EDGE_CLEAR_M),
                      end[:, 1] + LIFT_CLEAR_M], axis=-1)  # fmt: skip
     up, over = _smoothstep(np.clip(2.0 * ramp, 0.0, 1.0)), _smoothstep(np.clip(2.0 * ramp - 1.0, 0.0, 1.0))
     path = np.where(
@@ -379,7 +385,7 @@ def _hands_on(
     )
     flex_s, flex_e, possible = solve(path)
     w = np.where(possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 0.0)  # from the hanging arm's own angles
-    return w * flex_s, (1.0 - w) * base_flex + w * flex_e
+    return w * flex_s, (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
 
 
 def _foot_poses(
@@ -584,15 +590,18 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     amplitude = np.radians(style.arm_swing * (ARM_SWING_DEG[0] + ARM_SWING_DEG[1] * np.clip(speed, 0.0, 1.5)))
     swing_left = walk * amplitude * np.cos(np.pi * (phase - 1.8))
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
-        on_shoulder, flex = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg))
+        on_shoulder, flex, palm = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg)), np.zeros(n)
         if on_surface.any():
-            on_shoulder, flex = _hands_on(traj, body, glob, pelvis, heading, prefix, sign, on_surface, flex[0])
+            on_shoulder, flex, palm = _hands_on(traj, body, glob, pelvis, heading, prefix, sign, on_surface, flex[0])
         flex = flex + 0.5 * np.maximum(swing, 0.0)
         shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
+        # resting, the hand lies flat on the surface, fingers forward and a little inward (the T-pose's palms face down)
+        flat = rot_z(heading + sign * np.radians(90.0 + HANDS_INWARD_DEG))
+        hand = quat_to_matrix(quat_slerp(matrix_to_quat(elbow), matrix_to_quat(flat), palm)) if palm.any() else elbow
         glob[:, J[f"{prefix}_shoulder"]] = shoulder
         glob[:, J[f"{prefix}_elbow"]] = elbow
-        glob[:, J[f"{prefix}_wrist"]] = elbow
-        glob[:, J[f"{prefix}_hand"]] = elbow
+        glob[:, J[f"{prefix}_wrist"]] = hand
+        glob[:, J[f"{prefix}_hand"]] = hand
 
     local_quats = matrix_to_quat(global_to_local(glob))
     return Motion(

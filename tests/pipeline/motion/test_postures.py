@@ -36,7 +36,7 @@ def _standing(surface: np.ndarray) -> Trajectory:
                       surface)  # fmt: skip
 
 
-@pytest.mark.parametrize(("edge", "height"), [(0.2, 1.0), (0.35, 1.0), (0.3, 1.15), (0.25, 0.9)])
+@pytest.mark.parametrize(("edge", "height"), [(0.2, 1.0), (0.35, 1.0), (0.3, 1.15), (0.3, 0.95)])
 def test_gait_rests_both_hands_on_a_reachable_surface_and_clears_its_edge(edge: float, height: float) -> None:
     n = 240
     surface = np.full((n, 2), np.nan)
@@ -44,12 +44,15 @@ def test_gait_rests_both_hands_on_a_reachable_surface_and_clears_its_edge(edge: 
     rested = 0
     for seed in range(5):
         motion = generate_gait(_standing(surface), style_for(seed, MotionConfig()))
-        joints = motion.joints
+        joints, rots = motion.fk()
         hands = joints[:, [J["left_hand"], J["right_hand"]]]
         if np.abs(hands[120, :, 2] - height - PALM_M).max() < 0.005:  # this body reaches it
             rested += 1
             np.testing.assert_allclose(hands[90:150, :, 0], edge + ONTO_SURFACE_M, atol=0.005)
             np.testing.assert_allclose(hands[90:150, :, 2], height + PALM_M, atol=0.005)
+            palms = rots[:, [J["left_hand"], J["right_hand"]]] @ np.array([0.0, 0.0, -1.0])  # T-pose palms face down
+            assert (palms[90:150, :, 2] < -0.9).all()  # flat on the surface
+            assert (np.abs(palms[:30, :, 1]) > 0.9).all()  # hanging: facing the thighs
         beyond = hands[..., 0] > edge + 0.005  # over the surface: the mid-palm stays above its top
         assert (hands[..., 2][beyond] >= height + 0.01).all()
         assert (hands[:30, :, 2] < 0.95).all() and (hands[-20:, :, 2] < 0.95).all()  # arms down before and after
