@@ -106,7 +106,9 @@ ARM_HANG_DEG = 82.0  # the arms hang this far down from the T-pose (8° out from
 HANDS_ITERATIONS = 2  # corrections of the hands' planar solve by where the arm really puts them
 HANDS_INWARD_DEG = 15.0  # resting on a surface, the fingers point this far inward of straight ahead
 HANDS_RAMP_S = 1.0  # the arms move onto a counter, desk or table, and off it, over about this long
-HANDS_LEAN_DEG, HANDS_HEAD_DEG = 5.0, 12.0  # resting the hands there, the trunk leans and the head looks down
+HANDS_LEAN_DEG = np.array([5.0, 10.0, 15.0, 20.0])  # resting the hands there, the trunk leans the least of these
+HANDS_HEAD_DEG = 12.0  # that reaches, and the head looks down
+HANDS_SLACK_M = 0.03  # a surface counts as reachable from a lean when it would be from this much farther
 # Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
 # trunk and the pelvis (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999, Exp. Brain Res. 129:629).
 HEAD_LEAD_S, TRUNK_LEAD_S, PELVIS_LEAD_S = 0.25, 0.2, 0.15
@@ -302,23 +304,32 @@ class _Body:
             np.linalg.norm(r[J["left_hand"]] - r[J["left_wrist"]]) * np.cos(np.radians(HANDS_INWARD_DEG))
         )
 
-    def hands_on_surface(self, traj: Trajectory, idle: np.ndarray, lean: float) -> np.ndarray:
-        """How much (0-1) the body leans to rest its hands on a counter, desk or table per frame.
+    def hands_on_surface(self, traj: Trajectory, idle: np.ndarray, lean: float) -> tuple[np.ndarray, np.ndarray]:
+        """How much (0-1) the body rests its hands on a counter, desk or table, and how far it leans (rad).
 
-        Where the standing body, its trunk pitched forward by ``lean`` (rad) from the pelvis up as the
-        gait pitches it, can reach the surface of ``traj.surface``
-        (:func:`song.pipeline.motion.postures.arm_on_surface`); ramped on and off over ``HANDS_RAMP_S``.
+        Per frame of ``traj.surface``: the least forward lean among ``HANDS_LEAN_DEG`` (the trunk pitched
+        from the pelvis up as the gait pitches it, on top of its own ``lean``) from which the standing
+        body reaches the surface (:func:`song.pipeline.motion.postures.arm_on_surface`); both ramped
+        on and off over ``HANDS_RAMP_S``.
         """
+        n = traj.n_frames
         if traj.surface is None:
-            return np.zeros(traj.n_frames)
-        r, point = self.rest, self.rest[0].copy()
-        for joint in _CHAIN["left"]:  # spine1..3 take 1/3, 2/3 and all of the chest's pitch
-            parent = PARENTS[joint]
-            share = {J["spine1"]: 0.0, J["spine2"]: 1 / 3, J["spine3"]: 2 / 3}.get(parent, 1.0)
-            point = point + rot_y(np.array([share * lean]))[0] @ (r[joint] - r[parent])
+            return np.zeros(n), np.zeros(n)
         edge, height = traj.surface.T
-        _, _, possible = arm_on_surface(edge - self.hand_reach, height, point[[0, 2]], self.upper_arm, self.forearm)
-        return gaussian_filter1d(possible.astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps, mode="nearest") * idle
+        need = np.full(n, np.nan)
+        for extra in np.radians(HANDS_LEAN_DEG)[::-1]:  # the least lean that reaches wins
+            r, point = self.rest, self.rest[0].copy()
+            for joint in _CHAIN["left"]:  # spine1..3 take 1/3, 2/3 and all of the chest's pitch
+                parent = PARENTS[joint]
+                share = {J["pelvis"]: 0.0, J["spine1"]: 1 / 3, J["spine2"]: 2 / 3}.get(parent, 1.0)
+                point = point + rot_y(np.array([share * (lean + extra)]))[0] @ (r[joint] - r[parent])
+            # with some slack: the pose's own sway and breathing must not take the surface out of reach
+            far = edge - self.hand_reach + HANDS_SLACK_M
+            reach = arm_on_surface(far, height, point[[0, 2]], self.upper_arm, self.forearm)[2]
+            need[reach] = extra
+        sigma = HANDS_RAMP_S / 4.0 * traj.fps
+        hold = gaussian_filter1d(np.isfinite(need).astype(np.float64), sigma, mode="nearest") * idle
+        return hold, gaussian_filter1d(np.nan_to_num(_held(need[:, None])[:, 0], nan=0.0), sigma, mode="nearest")
 
 
 def _arm(rot_chest: np.ndarray, swing: np.ndarray, flex: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
@@ -338,7 +349,7 @@ def _held(values: np.ndarray) -> np.ndarray:
 
 def _hands_on(
     traj: Trajectory, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray, side: str,
-    sign: float, hold: np.ndarray, base_flex: float,
+    sign: float, hold: np.ndarray, base_flex: float, chest_pitch: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Shoulder flexion, elbow flexion (rad) and palm turn (0-1) of one arm going onto ``traj.surface`` by ``hold``.
 
@@ -348,7 +359,10 @@ def _hands_on(
     two-bone solve (:func:`song.pipeline.motion.postures.arm_to`) from where the shoulder is in this pose
     (``glob`` holds the pelvis, spine and collar rotations: the trunk's lean is included), corrected
     ``HANDS_ITERATIONS`` times by where the arm, hanging slightly out to the side, really puts the hand.
-    The palm turns from facing the thigh to lying flat as the hand moves over the surface. Where the surface is out of reach the arm hangs as it would.
+    The arm swings in the chest's frame, which leans forward by ``chest_pitch`` (rad): the planar
+    solve's shoulder flexion (from the vertical) is that swing less the lean. The palm turns from facing
+    the thigh to lying flat as the hand moves over the surface. Where the surface is out of reach the
+    arm hangs as it would.
     """
     rest, n = body.rest, traj.n_frames
     shoulder = pelvis.copy()
@@ -360,8 +374,8 @@ def _hands_on(
     fore = rest[J[f"{side}_wrist"]] - rest[J[f"{side}_elbow"]]
     chest = glob[:, J["spine3"]]
 
-    def wrist_at(swing: np.ndarray, flex: np.ndarray) -> np.ndarray:  # (T, 2): forward of the plan, height
-        rot_s, rot_e = _arm(chest, swing, flex, sign)
+    def wrist_at(flex_s: np.ndarray, flex_e: np.ndarray) -> np.ndarray:  # (T, 2): forward of the plan, height
+        rot_s, rot_e = _arm(chest, flex_s + chest_pitch, flex_e, sign)
         hand = shoulder + np.einsum("tij,j->ti", rot_s, upper) + np.einsum("tij,j->ti", rot_e, fore)
         return np.stack([((hand[:, :2] - traj.xy) * forward).sum(-1), hand[:, 2]], axis=-1)
 
@@ -376,7 +390,7 @@ def _hands_on(
     end = _held(traj.surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
     ramp = np.minimum(hold, gaussian_filter1d(solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps))
     ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * traj.fps))  # the last turning step ends at once
-    hanging = wrist_at(np.zeros(n), np.full(n, base_flex))
+    hanging = wrist_at(-chest_pitch, np.full(n, base_flex))
     lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] + body.hand_reach - ONTO_SURFACE_M - EDGE_CLEAR_M),
                      end[:, 1] + LIFT_CLEAR_M], axis=-1)  # fmt: skip
     up, over = _smoothstep(np.clip(2.0 * ramp, 0.0, 1.0)), _smoothstep(np.clip(2.0 * ramp - 1.0, 0.0, 1.0))
@@ -385,7 +399,7 @@ def _hands_on(
     )
     flex_s, flex_e, possible = solve(path)
     w = np.where(possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 0.0)  # from the hanging arm's own angles
-    return w * flex_s, (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
+    return w * (flex_s + chest_pitch), (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
 
 
 def _foot_poses(
@@ -573,9 +587,9 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         glob[:, J[foot_name]] = rot_foot
 
     # trunk, head, arms
-    on_surface = body.hands_on_surface(traj, idle, 0.5 * lean + np.radians(HANDS_LEAN_DEG))
+    on_surface, surface_lean = body.hands_on_surface(traj, idle, 0.5 * lean)
     chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
-    chest_pitch = chest_pitch + on_surface * np.radians(HANDS_LEAN_DEG)
+    chest_pitch = chest_pitch + on_surface * surface_lean
     rot_chest = rot_z(_ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
     for name, w in (("spine1", 1 / 3), ("spine2", 2 / 3)):
         glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
@@ -592,7 +606,9 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
         on_shoulder, flex, palm = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg)), np.zeros(n)
         if on_surface.any():
-            on_shoulder, flex, palm = _hands_on(traj, body, glob, pelvis, heading, prefix, sign, on_surface, flex[0])
+            on_shoulder, flex, palm = _hands_on(
+                traj, body, glob, pelvis, heading, prefix, sign, on_surface, flex[0], chest_pitch
+            )
         flex = flex + 0.5 * np.maximum(swing, 0.0)
         shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
         # resting, the hand lies flat on the surface, fingers forward and a little inward (the T-pose's palms face down)
