@@ -98,6 +98,7 @@ SWING_PITCH = (0.05, 0.6)  # the foot turns from toe-down (toe-off) to toe-up (h
 # Shoulder swing amplitude a + b·v degrees (scaled per person by 0.75-1.25): ±10-25° at 1.0-1.4 m/s, growing
 # with speed (Murray et al. 1967, J. Bone Joint Surg. 49A:336; Collins et al. 2009, Proc. R. Soc. B 276:3679).
 ARM_SWING_DEG = (6.0, 10.0)
+SPINE_PITCH_SHARE = (("spine1", 1 / 3), ("spine2", 2 / 3))  # of the chest's rotation, the rest is spine3's
 _CHAIN = {  # the joints from the pelvis to each shoulder, in order
     side: [J["spine1"], J["spine2"], J["spine3"], J[f"{side}_collar"], J[f"{side}_shoulder"]]
     for side in ("left", "right")
@@ -296,7 +297,6 @@ class _Body:
         # the hip-ankle distance of the rest pose: the skeleton's knee is slightly bent at rest, so a leg
         # stretched farther than this would bend the knee backwards (knee flexion is measured from rest)
         self.leg = float(np.linalg.norm(r[J["left_ankle"]] - r[J["left_hip"]]))
-        self.shoulder = r[J["left_shoulder"], [0, 2]]  # forward offset and height of the shoulder, standing
         self.upper_arm = float(np.linalg.norm(r[J["left_elbow"]] - r[J["left_shoulder"]]))
         self.forearm = float(np.linalg.norm(r[J["left_wrist"]] - r[J["left_elbow"]]))
         # a hand lying flat, fingers turned in by HANDS_INWARD_DEG: its mid-palm joint this far ahead of the wrist
@@ -319,9 +319,10 @@ class _Body:
         need = np.full(n, np.nan)
         for extra in np.radians(HANDS_LEAN_DEG)[::-1]:  # the least lean that reaches wins
             r, point = self.rest, self.rest[0].copy()
-            for joint in _CHAIN["left"]:  # spine1..3 take 1/3, 2/3 and all of the chest's pitch
+            shares = {J["pelvis"]: 0.0, **{J[name]: w for name, w in SPINE_PITCH_SHARE}}
+            for joint in _CHAIN["left"]:  # each offset turns with its parent's share of the chest's pitch
                 parent = PARENTS[joint]
-                share = {J["pelvis"]: 0.0, J["spine1"]: 1 / 3, J["spine2"]: 2 / 3}.get(parent, 1.0)
+                share = shares.get(parent, 1.0)
                 point = point + rot_y(np.array([share * (lean + extra)]))[0] @ (r[joint] - r[parent])
             # with some slack: the pose's own sway and breathing must not take the surface out of reach
             far = edge - self.hand_reach + HANDS_SLACK_M
@@ -591,7 +592,7 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
     chest_pitch = chest_pitch + on_surface * surface_lean
     rot_chest = rot_z(_ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
-    for name, w in (("spine1", 1 / 3), ("spine2", 2 / 3)):
+    for name, w in SPINE_PITCH_SHARE:
         glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
     glob[:, J["spine3"]] = rot_chest
     look = _ahead(heading, t, HEAD_LEAD_S) + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
@@ -612,8 +613,10 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         flex = flex + 0.5 * np.maximum(swing, 0.0)
         shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
         # resting, the hand lies flat on the surface, fingers forward and a little inward (the T-pose's palms face down)
-        flat = rot_z(heading + sign * np.radians(90.0 + HANDS_INWARD_DEG))
-        hand = quat_to_matrix(quat_slerp(matrix_to_quat(elbow), matrix_to_quat(flat), palm)) if palm.any() else elbow
+        hand = elbow
+        if palm.any():
+            flat = rot_z(heading + sign * np.radians(90.0 + HANDS_INWARD_DEG))
+            hand = quat_to_matrix(quat_slerp(matrix_to_quat(elbow), matrix_to_quat(flat), palm))
         glob[:, J[f"{prefix}_shoulder"]] = shoulder
         glob[:, J[f"{prefix}_elbow"]] = elbow
         glob[:, J[f"{prefix}_wrist"]] = hand
