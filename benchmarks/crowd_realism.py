@@ -8,7 +8,8 @@ Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 
 computes on the same footing the real ETH and Hotel sequences (EWAP obsmat files in ../shared; skipped
 with a reason when absent). Also per configuration: the closest centre distance at any frame (walking
 or standing, against 2r), the share of intents that arrive, the walking share among present
-pedestrians per second between 5 s and 55 s (mean over scenes; the minimum second), and the crowd
+pedestrians per second between 5 s and 55 s (mean over scenes, and over the sample scenes alone: the
+target's set; the minimum second), and the crowd
 stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
 """
 
@@ -60,7 +61,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
     run = work / f"{avoidance}-{profile}"
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
-    tracks, closest, shares, arrived, total, facing = [], np.inf, [], 0, 0, []
+    tracks, closest, shares, sample_shares, arrived, total, facing = [], np.inf, [], [], 0, 0, []
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
@@ -74,11 +75,14 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
         scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
         tracks.append(scene_tracks)
         shares.append(_walking_share(scene_tracks))
+        if not scene.name.startswith("gen_"):
+            sample_shares.append(shares[-1])
         if len(crowd.ids) > 1:
             d = np.hypot(*(crowd.xy[:, None] - crowd.xy[None]).transpose(3, 0, 1, 2))
             d[np.arange(len(d)), np.arange(len(d))] = np.inf
             closest = min(closest, float(d.min()))
     share = np.nanmean(np.stack(shares), axis=0)[5:56] if shares else np.zeros(0)
+    sample = np.nanmean(np.stack(sample_shares), axis=0)[5:56] if sample_shares else np.zeros(0)
     stats = crowd_statistics(tracks)
     stats.update(
         {
@@ -87,6 +91,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
             "arrived_share": round(arrived / max(total, 1), 4),
             "walking_share_5_55_mean": round(float(np.mean(share)), 4) if len(share) else None,
             "walking_share_5_55_min": round(float(np.min(share)), 4) if len(share) else None,
+            "walking_share_samples_5_55_mean": round(float(np.mean(sample)), 4) if len(sample) else None,
+            "walking_share_samples_5_55_min": round(float(np.min(sample)), 4) if len(sample) else None,
             "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
             "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,

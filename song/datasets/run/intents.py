@@ -14,7 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from song.datasets.run.layout import INTENTS_FILE
 from song.errors import StageError
 
-INTENTS_SCHEMA_VERSION = 2  # 2: routines of several legs with dwell times
+INTENTS_SCHEMA_VERSION = 3  # 2: routines of several legs with dwell times; 3: departures before t = 0
 
 
 class Provenance(BaseModel):
@@ -53,7 +53,9 @@ class Intent(BaseModel):
     start_xy: tuple[float, float]
     goal_xy: tuple[float, float]
     speed: float = Field(..., gt=0.0, description="preferred walking speed, m/s")
-    depart_time: float = Field(..., ge=0.0, description="departure time after scenario start, s")
+    depart_time: float = Field(
+        ..., ge=-600.0, description="departure time, s from the scenario's start (< 0: already on its way at t = 0)"
+    )
     geodesic_m: float = Field(0.0, ge=0.0, description="grid shortest-path length start→goal, m")
     provenance: Provenance
     legs: list[Leg] = Field(default_factory=list, description="the routine's legs, the first one included")
@@ -116,8 +118,8 @@ def read_intents(path: str | Path) -> IntentSet:
         raise StageError(f"{path}: cannot read intents: {exc}") from exc
     if version != INTENTS_SCHEMA_VERSION:
         raise StageError(
-            f"{path}: intents schema_version {version} is not {INTENTS_SCHEMA_VERSION} (routines of several legs "
-            "since 2); re-run the intents stage: `song rerun intents --run RUN` (or `song synth`, it resumes)"
+            f"{path}: intents schema_version {version} is not {INTENTS_SCHEMA_VERSION} (departures before the "
+            "scenario start since 3); re-run the intents stage: `song rerun intents --run RUN` (or `song synth`, it resumes)"
         )
     try:
         return IntentSet.model_validate_json(raw)

@@ -62,7 +62,7 @@ def _length(v: np.ndarray) -> np.ndarray:
     return np.hypot(v[..., 0], v[..., 1])
 
 
-YIELD_S, MAX_YIELDS = 3.0, 2  # a pedestrian still stalled after its replan stands aside this long, this often
+YIELD_S, MAX_YIELDS = 3.0, 4  # a pedestrian still stalled after its replan stands aside this long, this often
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
 # standing at an object (before departure, dwelling, after the last leg) a pedestrian turns to face it at this
 # rate: a quarter turn on the spot in about a second (in-place turns of 90-180° take 1-2 s; Hase & Stein 1999)
@@ -582,6 +582,11 @@ def plan_crowd(
             counter facing it); without one it keeps the heading it arrived with.
     """
     jitter = _jitter(intents, cfg, rng)
+    lead = _lead_in_frames(intents, cfg.fps)
+    if lead:  # the simulation's clock starts at the earliest departure; the scenario's at frame `lead`
+        shift = lead / cfg.fps
+        intents = [i.model_copy(update={"depart_time": i.depart_time + shift}) for i in intents]
+        cfg = cfg.model_copy(update={"max_duration_s": cfg.max_duration_s + shift})
     kept = np.arange(len(intents))
     status: dict[int, dict] = {}
 
@@ -621,9 +626,15 @@ def plan_crowd(
     for k, arrived, arrival in zip(kept, run.w.arrived, run.w.arrival, strict=True):
         status[intents[k].id] = {
             "status": "arrived" if arrived else "timeout",
-            "reason": "" if arrived else f"did not arrive within {cfg.max_duration_s:g} s",
-            "arrival_s": round(float(arrival), 4) if arrived else None,
+            "reason": "" if arrived else f"did not arrive within {cfg.max_duration_s - lead / cfg.fps:g} s",
+            "arrival_s": round(float(arrival) - lead / cfg.fps, 4) if arrived else None,
         }
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
-    end = run.frame + 1
-    return CrowdPlan(ids, run.xy[:, :end].copy(), run.yaw[:, :end].copy(), run.speed[:, :end].copy(), cfg.fps, status)
+    span = slice(min(lead, run.frame), run.frame + 1)  # the scenario: from t = 0 on
+    return CrowdPlan(ids, run.xy[:, span].copy(), run.yaw[:, span].copy(), run.speed[:, span].copy(), cfg.fps, status)
+
+
+def _lead_in_frames(intents: list[Intent], fps: int) -> int:
+    """Frames simulated before the scenario's t = 0: people who departed earlier are on their way at t = 0."""
+    earliest = min((i.depart_time for i in intents), default=0.0)
+    return int(np.ceil(-earliest * fps - 1e-9)) if earliest < 0 else 0

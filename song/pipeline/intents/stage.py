@@ -152,7 +152,7 @@ def filter_intents(
                 start_xy=(round(float(start[0]), 4), round(float(start[1]), 4)),
                 goal_xy=(round(float(goal[0]), 4), round(float(goal[1]), 4)),
                 speed=round(draw_speed(cfg, rng), 4),
-                depart_time=round(float(rng.uniform(0.0, cfg.max_depart_s)), 4),
+                depart_time=round(float(rng.uniform(-cfg.lead_in_s, cfg.max_depart_s)), 4),
                 geodesic_m=round(length, 3),
                 provenance=provenance,
             )
@@ -178,12 +178,12 @@ def draw_speed(cfg, rng: np.random.Generator) -> float:
 # dwell at an object, s, by what the object is (first matching keyword): waiting at a counter, working
 # at a desk, browsing a shelf, using a machine; default a short stop
 DWELL_S = (
-    (("counter", "reception", "checkout", "desk", "help", "bar", "pharmacy"), (5.0, 15.0)),
-    (("workstation", "table", "computer", "bed", "sofa", "chair", "seat"), (10.0, 30.0)),
-    (("shelf", "shelving", "book", "stack", "rack", "display"), (5.0, 20.0)),
-    (("printer", "machine", "fridge", "elevator", "sink", "coffee"), (3.0, 10.0)),
+    (("counter", "reception", "checkout", "desk", "help", "bar", "pharmacy"), (3.0, 8.0)),
+    (("workstation", "table", "computer", "bed", "sofa", "chair", "seat"), (5.0, 15.0)),
+    (("shelf", "shelving", "book", "stack", "rack", "display"), (3.0, 10.0)),
+    (("printer", "machine", "fridge", "elevator", "sink", "coffee"), (3.0, 6.0)),
 )
-DEFAULT_DWELL_S = (3.0, 12.0)
+DEFAULT_DWELL_S = (3.0, 6.0)
 
 
 def dwell_time(obj, rng: np.random.Generator) -> float:

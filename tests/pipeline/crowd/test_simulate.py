@@ -95,6 +95,20 @@ def test_crowd_through_a_door_keeps_the_invariants(make_scene) -> None:
     assert np.median(err[fast]) < 0.3
 
 
+def test_departures_before_t0_open_the_scenario_mid_walk(make_scene) -> None:
+    """Departing at −3 s is the same crowd seen from 3 s on: tracks cut there, arrivals 3 s earlier."""
+    base, mesh = _run(make_scene, SWAP)
+    early = [i.model_copy(update={"depart_time": i.depart_time - 3.0}) for i in SWAP]
+    plan, _ = _run(make_scene, early)
+    cut = 3 * CFG.fps
+    assert np.array_equal(plan.xy, base.xy[:, cut:]) and np.array_equal(plan.yaw, base.yaw[:, cut:])
+    for k, info in plan.status.items():
+        assert info["status"] == base.status[k]["status"]
+        assert abs(info["arrival_s"] - (base.status[k]["arrival_s"] - 3.0)) < 1e-6
+    assert np.linalg.norm(plan.xy[0, 0] - np.asarray(SWAP[0].start_xy)) > 1.0  # on its way at t = 0
+    check_crowd(plan, mesh, early)
+
+
 def test_same_seed_same_bytes_other_seed_other_jitter(make_scene) -> None:
     a, _ = _run(make_scene, SWAP, seed=0)
     b, _ = _run(make_scene, SWAP, seed=0)
