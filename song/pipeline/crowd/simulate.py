@@ -582,9 +582,9 @@ def plan_crowd(
             counter facing it); without one it keeps the heading it arrived with.
     """
     jitter = _jitter(intents, cfg, rng)
-    lead = _lead_in_frames(intents, cfg.fps)
-    if lead:  # the simulation's clock starts at the earliest departure; the scenario's at frame `lead`
-        shift = lead / cfg.fps
+    lead = _lead_in_frames(intents, cfg.fps)  # the simulation's clock starts at the earliest departure
+    shift = lead / cfg.fps  # the scenario's t = 0 on the simulation's clock
+    if lead:
         intents = [i.model_copy(update={"depart_time": i.depart_time + shift}) for i in intents]
         cfg = cfg.model_copy(update={"max_duration_s": cfg.max_duration_s + shift})
     kept = np.arange(len(intents))
@@ -626,8 +626,8 @@ def plan_crowd(
     for k, arrived, arrival in zip(kept, run.w.arrived, run.w.arrival, strict=True):
         status[intents[k].id] = {
             "status": "arrived" if arrived else "timeout",
-            "reason": "" if arrived else f"did not arrive within {cfg.max_duration_s - lead / cfg.fps:g} s",
-            "arrival_s": round(float(arrival) - lead / cfg.fps, 4) if arrived else None,
+            "reason": "" if arrived else f"did not arrive within {cfg.max_duration_s - shift:g} s",
+            "arrival_s": round(float(arrival) - shift, 4) if arrived else None,
         }
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
     span = slice(min(lead, run.frame), run.frame + 1)  # the scenario: from t = 0 on
