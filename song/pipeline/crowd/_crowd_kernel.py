@@ -228,14 +228,15 @@ def record_frame(pos, vel, smooth, heading, face, max_turn, xy, yaw, speed, fram
 
 @numba.njit(cache=True, nogil=True)
 def avoidance_inputs(
-    pos, vel, cur, nxt, has_next, goal, speed, moving, radius, dt, reach, influence, frame
+    pos, vel, cur, nxt, has_next, goal, speed, moving, radius, dt, reach, influence, frame, last_progress
 ):  # pragma: no cover
     """Who the avoidance model steers this frame, and its inputs for them.
 
     The walkers and whoever stands within ``reach`` of one (others cannot change the answer); those
     standing are marked in ``influence`` (in place: they may change a walker's step in ``frame``).
     Returns ``(rows (M,), positions (M, 2), velocities (M, 2), preferred velocities (M, 2)``
-    (:func:`preferred_velocities`), ``body radii (M,), speed limits (M,))`` (0 for those standing).
+    (:func:`preferred_velocities`), ``body radii (M,), speed limits (M,)`` (0 for those standing),
+    ``held up (M,))``: seconds since each walker last made progress along its path (0 for those standing).
     """
     near = near_walkers(pos, moving, reach)
     pref = preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, dt)
@@ -244,7 +245,8 @@ def avoidance_inputs(
         if near[i]:
             influence[i] = min(influence[i], frame)
     limits = np.where(moving, speed, 0.0)[rows]
-    return rows, pos[rows], vel[rows], pref[rows], np.full(len(rows), radius), limits
+    held = np.where(moving, np.maximum(frame * dt - last_progress, 0.0), 0.0)[rows]
+    return rows, pos[rows], vel[rows], pref[rows], np.full(len(rows), radius), limits, held
 
 
 @numba.njit(cache=True, nogil=True)

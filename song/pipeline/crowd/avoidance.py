@@ -48,6 +48,8 @@ ANTICIPATION_GAIN = 2.5  # sideways share of the preferred direction per unit of
 ANTICIPATION_MARGIN_M = 0.1  # the bend aims this far beyond the comfort distance (it fades to nothing at its aim)
 HALF_WIDTH_STEP_M = 0.05  # the passage half-width is resolved to this
 PERSONAL_MARGIN_M = 0.005  # a personal radius stays this far from touching anyone's (ORCA's collision branch)
+HELD_UP_S = 0.5  # a walker with no progress for this long starts giving up personal space (all it gives by twice that)
+HELD_UP_GIVE = 0.6  # the share of its personal space (beyond the body) that a held-up walker gives up
 
 # social force (Moussaïd et al. 2009, Table 1; relaxation time and walls as in pedsim_ros' defaults)
 SF_RELAXATION_S = 0.5  # τ: time to reach the preferred velocity
@@ -77,6 +79,7 @@ class LocalAvoidance(Protocol):
         preferred: np.ndarray,
         radii: np.ndarray,
         max_speeds: np.ndarray,
+        held_up: np.ndarray,
     ) -> np.ndarray:
         """New (N, 2) velocities, m/s.
 
@@ -86,6 +89,7 @@ class LocalAvoidance(Protocol):
             preferred: (N, 2) preferred velocities, m/s.
             radii: (N,) body radii, m.
             max_speeds: (N,) speed limits, m/s (0 for a standing pedestrian).
+            held_up: (N,) seconds since each walker last got closer to its goal (0 for those standing).
         """
         ...
 
@@ -292,7 +296,7 @@ def _room(x, y, grid, ox, oy, res):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True)
 def _orca_velocities(
-    positions, velocities, preferred, radii, max_speeds, field, thickness, frame, comfort, reach, tail
+    positions, velocities, preferred, radii, max_speeds, held_up, field, thickness, frame, comfort, reach, tail
 ):  # pragma: no cover
     """ORCA's new velocities with personal space, as :meth:`OrcaAvoidance.velocities` documents.
 
@@ -313,8 +317,9 @@ def _orca_velocities(
         # the wall comfort fades as a walker slows down to arrive (people step close to a counter or desk)
         pace = min(np.hypot(preferred[i, 0], preferred[i, 1]) / top, 1.0)
         wall_radii[i] = max(min(wall - ROOM_MARGIN_M, radii[i] + wall_comfort * pace), radii[i])
-        # personal space shrinks as a walker is held up (people accept closer passes in a jam)
-        going = min(np.hypot(velocities[i, 0], velocities[i, 1]) / top, 1.0)
+        # personal space shrinks as a walker is held up (people accept closer passes in a jam), not while
+        # it only slows down to let someone pass
+        going = 1.0 - HELD_UP_GIVE * min(max(held_up[i] - HELD_UP_S, 0.0) / HELD_UP_S, 1.0)
         personal_comfort[i] = radii[i] + (0.5 * distance - radii[i]) * going
     bent = preferred
     if n >= 2:
@@ -367,6 +372,7 @@ class OrcaAvoidance:
         preferred: np.ndarray,
         radii: np.ndarray,
         max_speeds: np.ndarray,
+        held_up: np.ndarray,
     ) -> np.ndarray:
         """ORCA's new velocities with personal-space radii (see :func:`song.pipeline.crowd.orca.orca_step`)."""
         # the room a walker has now and where its preferred velocity takes it within the obstacle horizon:
@@ -378,6 +384,7 @@ class OrcaAvoidance:
             np.ascontiguousarray(preferred, np.float64),
             np.ascontiguousarray(radii, np.float64),
             np.ascontiguousarray(max_speeds, np.float64),
+            np.ascontiguousarray(held_up, np.float64),
             self.wall_distance.field,
             self.wall_distance.thickness(upto),
             *self._constants,
@@ -434,6 +441,7 @@ class SocialForceAvoidance:
         preferred: np.ndarray,
         radii: np.ndarray,
         max_speeds: np.ndarray,
+        held_up: np.ndarray,
     ) -> np.ndarray:
         """One explicit Euler step of the forces; speeds clamped to the limits."""
         pace = np.minimum(np.hypot(preferred[:, 0], preferred[:, 1]) / np.maximum(max_speeds, 1e-9), 1.0)

@@ -25,7 +25,8 @@ else's step (:class:`_Run`), so the kept tracks are exactly those of a run witho
 
 Pedestrians exist for the whole scenario: they stand at their start until departure, walk their
 routine's legs with a dwell at every intermediate stop, and stand at the last goal after arriving;
-others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``).
+others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``). One due to walk
+off lets a walker coming by go first (:func:`_wait_for_passers`).
 """
 
 from __future__ import annotations
@@ -62,6 +63,7 @@ def _length(v: np.ndarray) -> np.ndarray:
     return np.hypot(v[..., 0], v[..., 1])
 
 
+PASSER_LOOKAHEAD_S, MAX_START_WAIT_S = 1.0, 3.0  # one about to walk off lets those this close in time pass first
 YIELD_S, MAX_YIELDS = 3.0, 4  # a pedestrian still stalled after its replan stands aside this long, this often
 PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in stall_time_s is stalled
 # standing at an object (before departure, dwelling, after the last leg) a pedestrian turns to face it at this
@@ -127,6 +129,7 @@ class _Walkers:
     dwell_until: np.ndarray  # (N,) s: standing at an intermediate stop until then
     influence: np.ndarray  # (N,) first frame in which this pedestrian changed anyone else's step (inf: none yet)
     face: np.ndarray  # (N, 2) the point a pedestrian standing at an object turns to (nan: none, or walking), m
+    waited: np.ndarray  # (N,) s: how long the pedestrian has put off walking off, for someone passing close
 
 
 def _snapshot(w: _Walkers) -> _Walkers:
@@ -265,6 +268,7 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         dwell_until=np.zeros(n),
         influence=np.full(n, np.inf),
         face=face,
+        waited=np.zeros(n),
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
@@ -283,6 +287,7 @@ def _next_leg(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
     _set_path(w, k, path if path is not None else w.goal[k : k + 1].copy())
     w.best[k] = _remaining(w, np.array([k]))[0]
     w.last_progress[k] = w.dwell_until[k]
+    w.waited[k] = 0.0
     if not stops[leg][2]:  # a step aside is part of the leg it interrupts
         w.replanned[k], w.yields[k] = "", 0
     return True
@@ -356,6 +361,38 @@ def _mark_influence(w: _Walkers, idx, frame: int) -> None:
     w.influence[idx] = np.minimum(w.influence[idx], frame)
 
 
+def _wait_for_passers(w: _Walkers, moving: np.ndarray, frame: int, cfg: CrowdConfig) -> None:
+    """Pedestrians due to walk off in ``frame`` wait while a walker is passing closer than the comfort distance.
+
+    People do not step out into someone's way: one about to leave a spot (its departure or the end of a
+    dwell) waits while a walker would come within ``crowd.comfort_distance_m`` of it in the next
+    ``PASSER_LOOKAHEAD_S`` (moving on as it does), for at most ``MAX_START_WAIT_S`` per start. Those
+    waiting are taken out of ``moving`` (in place) and start at the earliest in the next frame.
+    """
+    fps = cfg.fps
+    before = (frame - 1) / fps
+    due = moving & ((w.depart > before) | (w.dwell_until > before)) & (w.waited < MAX_START_WAIT_S)
+    walkers = np.flatnonzero(moving & ~due)
+    if not due.any() or not len(walkers):
+        return
+    for k in np.flatnonzero(due):
+        rel = w.pos[walkers] - w.pos[k]
+        ahead = w.vel[walkers] * PASSER_LOOKAHEAD_S
+        s = np.clip(-(rel * ahead).sum(1) / np.maximum((ahead * ahead).sum(1), 1e-12), 0.0, 1.0)
+        passers = walkers[_length(rel + s[:, None] * ahead) < cfg.comfort_distance_m]
+        if not len(passers):
+            continue
+        _mark_influence(w, passers, frame)  # they put off k's start
+        start = (frame + 1) / fps
+        if w.depart[k] > before:
+            w.depart[k] = start
+        else:
+            w.dwell_until[k] = start
+        w.last_progress[k] = max(w.last_progress[k], start)
+        w.waited[k] += 1.0 / fps
+        moving[k] = False
+
+
 def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.ndarray, cfg: CrowdConfig, frame: int):
     dt, r = 1.0 / cfg.fps, cfg.agent_radius_m
     if not moving.any():
@@ -365,7 +402,20 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
     # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
     reach = max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M)
     rows, *inputs = avoidance_inputs(
-        w.pos, w.vel, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, r, dt, reach, w.influence, frame
+        w.pos,
+        w.vel,
+        w.cur,
+        w.nxt,
+        w.has_next,
+        w.goal,
+        w.speed,
+        moving,
+        r,
+        dt,
+        reach,
+        w.influence,
+        frame,
+        w.last_progress,
     )
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
@@ -513,6 +563,7 @@ class _Run:
             frame = self.frame + 1
             t = frame / cfg.fps
             moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
+            _wait_for_passers(w, moving, frame, cfg)
             w.face[moving] = np.nan  # it has left its object
             _step_frame(w, self.mesh, self.avoid, moving, cfg, frame)
             failed = _check_progress(w, self.mesh, moving, frame, cfg)

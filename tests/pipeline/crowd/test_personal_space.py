@@ -14,7 +14,7 @@ from song.datasets.scenes import Region, SemanticMap, load_scene_package, write_
 from song.datasets.scenes.model import OccupancySpec
 from song.pipeline.crowd.avoidance import make_avoidance
 from song.pipeline.crowd.navmesh import scene_navmesh
-from song.pipeline.crowd.simulate import plan_crowd
+from song.pipeline.crowd.simulate import MAX_START_WAIT_S, plan_crowd
 from song.util import derive_rng
 from tests.pipeline.crowd.test_simulate import intent
 
@@ -158,6 +158,26 @@ def test_personal_radius_by_room_neighbours_and_standing() -> None:
         assert got[1] == R and abs(got[0] - expected) < 0.01, (gap, got)
 
 
+def test_personal_space_is_given_up_when_held_up_not_when_slowing(tmp_path: Path) -> None:
+    """Two slow walkers closing in head-on keep their personal space (they deviate from their preferred
+    velocities); the same pair held up (no progress for a while) gives it up and presses on."""
+    from song.pipeline.crowd.avoidance import HELD_UP_S
+
+    scene = room(tmp_path, 12.0, 8.0, "hall")
+    mesh = scene_navmesh(load_scene_package(scene), R, CFG.contour_error_m)
+    avoid = make_avoidance(mesh, CFG)
+    pos = np.array([[5.6, 4.0], [6.4, 4.05]])  # 0.8 m apart: inside the comfort distance
+    vel, pref = np.array([[0.3, 0.0], [-0.3, 0.0]]), np.array([[1.3, 0.0], [-1.3, 0.0]])
+    radii, limits = np.full(2, R), np.full(2, 1.3)
+
+    def deviation(held: float) -> float:
+        out = avoid.velocities(pos, vel, pref, radii, limits, np.full(2, held))
+        return float(np.linalg.norm(out - pref, axis=1).max())
+
+    assert deviation(0.0) == deviation(HELD_UP_S)  # slowed down but moving on: full personal space
+    assert deviation(2 * HELD_UP_S) < deviation(0.0) - 0.05
+
+
 def test_passage_half_width_is_the_local_thickness(tmp_path: Path) -> None:
     """In a 1.2 m wide corridor the half-width is 0.6 m across the whole width, against the wall too; in a
     5 m room it is the cap everywhere, beside the walls too."""
@@ -170,3 +190,20 @@ def test_passage_half_width_is_the_local_thickness(tmp_path: Path) -> None:
         across = np.column_stack([np.linspace(x0 + 0.02, x0 + width - 2 * R - 0.02, 9), np.full(9, 4.0)])
         half = walls.half_width_at(across, 0.75)
         assert np.all(np.abs(half - expected) <= 0.05 + 1e-9), (width, half)
+
+
+def test_a_pedestrian_about_to_walk_off_lets_a_passer_go_by(tmp_path: Path) -> None:
+    """Due to leave its spot as a walker comes by within the comfort distance, it waits until the walker has
+    passed (people do not step out into someone's way), then leaves."""
+    scene = room(tmp_path, 12.0, 1.5, "aisle")  # too narrow to pass someone standing at the comfort distance
+    due = 5.0
+    intents = [walker(0, (6.0, 1.25), (1.0, 1.0), depart=due), walker(1, (1.0, 0.6), (11.0, 0.6))]
+    plan, _ = simulate(scene, intents)
+    assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
+    k, p = list(plan.ped_ids).index(0), list(plan.ped_ids).index(1)
+    left = int(np.flatnonzero(np.linalg.norm(plan.xy[k] - plan.xy[k, 0], axis=-1) > 0.01)[0])
+    passer = plan.xy[p, round(due * plan.fps) :]
+    assert np.linalg.norm(passer - plan.xy[k, 0], axis=-1).min() < CFG.comfort_distance_m  # it came by close
+    assert due + 0.2 < left / plan.fps <= due + MAX_START_WAIT_S + 0.1
+    assert plan.xy[p, left, 0] > plan.xy[k, 0, 0]  # it left once the walker was past
+    assert closest(plan) >= 2 * R - 0.01
