@@ -250,6 +250,46 @@ def avoidance_inputs(
 
 
 @numba.njit(cache=True, nogil=True)
+def hold_starts(
+    pos, vel, depart, dwell_until, last_progress, waited, moving, influence, frame, fps, lookahead, comfort, max_wait
+):  # pragma: no cover
+    """Pedestrians due to walk off in ``frame`` who wait for a walker passing close (``_wait_for_passers``).
+
+    Due: walking at ``frame`` but not at the frame before (a departure or the end of a dwell), and not yet
+    waited ``max_wait`` s for this start. One waits while a walker (not due itself), moving on at its
+    velocity, would come within ``comfort`` of it in the next ``lookahead`` s: its start moves to the next
+    frame, it is taken out of ``moving``, and the walkers it waits for are marked in ``influence``.
+    All arrays are updated in place.
+    """
+    before, start = (frame - 1) / fps, (frame + 1) / fps
+    n = len(pos)
+    due = np.zeros(n, dtype=np.bool_)
+    for k in range(n):
+        due[k] = moving[k] and (depart[k] > before or dwell_until[k] > before) and waited[k] < max_wait
+    for k in range(n):
+        if not due[k]:
+            continue
+        held = False
+        for j in range(n):
+            if j == k or due[j] or not moving[j]:
+                continue
+            rx, ry = pos[j, 0] - pos[k, 0], pos[j, 1] - pos[k, 1]
+            ax, ay = vel[j, 0] * lookahead, vel[j, 1] * lookahead
+            s = min(max(-(rx * ax + ry * ay) / max(ax * ax + ay * ay, 1e-12), 0.0), 1.0)
+            if np.hypot(rx + s * ax, ry + s * ay) < comfort:
+                held = True
+                influence[j] = min(influence[j], frame)
+        if held:
+            if depart[k] > before:
+                depart[k] = start
+            else:
+                dwell_until[k] = start
+            last_progress[k] = max(last_progress[k], start)
+            waited[k] += 1.0 / fps
+            moving[k] = False
+
+
+@numba.njit(cache=True, nogil=True)
 def walking(depart, arrived, yield_until, dwell_until, t):  # pragma: no cover
     """(N,) bool: departed, not finished, not standing aside, not dwelling at a stop at time ``t``."""
     n = len(depart)

@@ -41,6 +41,7 @@ from song.geometry.navmesh import Navmesh, carve_discs
 from song.geometry.outline import nearest_on_outline
 from song.pipeline.crowd._crowd_kernel import (
     avoidance_inputs,
+    hold_starts,
     progress,
     reached_corners,
     record_frame,
@@ -367,30 +368,13 @@ def _wait_for_passers(w: _Walkers, moving: np.ndarray, frame: int, cfg: CrowdCon
     People do not step out into someone's way: one about to leave a spot (its departure or the end of a
     dwell) waits while a walker would come within ``crowd.comfort_distance_m`` of it in the next
     ``PASSER_LOOKAHEAD_S`` (moving on as it does), for at most ``MAX_START_WAIT_S`` per start. Those
-    waiting are taken out of ``moving`` (in place) and start at the earliest in the next frame.
+    waiting are taken out of ``moving`` (in place) and start at the earliest in the next frame; the
+    walkers they wait for are marked as having changed their steps (a removal rolls back before that).
     """
-    fps = cfg.fps
-    before = (frame - 1) / fps
-    due = moving & ((w.depart > before) | (w.dwell_until > before)) & (w.waited < MAX_START_WAIT_S)
-    walkers = np.flatnonzero(moving & ~due)
-    if not due.any() or not len(walkers):
-        return
-    for k in np.flatnonzero(due):
-        rel = w.pos[walkers] - w.pos[k]
-        ahead = w.vel[walkers] * PASSER_LOOKAHEAD_S
-        s = np.clip(-(rel * ahead).sum(1) / np.maximum((ahead * ahead).sum(1), 1e-12), 0.0, 1.0)
-        passers = walkers[_length(rel + s[:, None] * ahead) < cfg.comfort_distance_m]
-        if not len(passers):
-            continue
-        _mark_influence(w, passers, frame)  # they put off k's start
-        start = (frame + 1) / fps
-        if w.depart[k] > before:
-            w.depart[k] = start
-        else:
-            w.dwell_until[k] = start
-        w.last_progress[k] = max(w.last_progress[k], start)
-        w.waited[k] += 1.0 / fps
-        moving[k] = False
+    hold_starts(
+        w.pos, w.vel, w.depart, w.dwell_until, w.last_progress, w.waited, moving, w.influence, frame, cfg.fps,
+        PASSER_LOOKAHEAD_S, cfg.comfort_distance_m, MAX_START_WAIT_S,
+    )  # fmt: skip
 
 
 def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.ndarray, cfg: CrowdConfig, frame: int):
