@@ -14,6 +14,7 @@ def anticipate_reference(
     comfort_distance: float,
     horizon: float,
     reach: float,
+    room: np.ndarray | None = None,
 ) -> np.ndarray:
     """Reference twin of :func:`song.pipeline.crowd.avoidance.anticipate` (vectorised numpy, same arithmetic)."""
     speed = np.hypot(preferred[:, 0], preferred[:, 1])
@@ -35,7 +36,8 @@ def anticipate_reference(
     aim = comfort_distance + ANTICIPATION_MARGIN_M
     weight = np.maximum(aim - d, 0.0) / aim / (1.0 + t)
     push = (away * weight).sum(axis=1)
-    bent = heading + ANTICIPATION_GAIN * push[:, None] * side
+    gain = ANTICIPATION_GAIN * (np.ones(len(positions)) if room is None else np.asarray(room, np.float64))
+    bent = heading + gain[walking, None] * push[:, None] * side
     out = preferred.copy()
     out[walking] = bent / np.maximum(np.hypot(bent[:, 0], bent[:, 1]), 1e-9)[:, None] * speed[walking, None]
     return out

@@ -44,7 +44,9 @@ from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, build_obstacles, k
 
 WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from the mesh
 ROOM_MARGIN_M = 0.01  # the wall comfort never reaches closer than this to a wall
-ANTICIPATION_GAIN = 2.5  # sideways share of the preferred direction per unit of predicted comfort shortfall
+ANTICIPATION_GAIN = (
+    4.0  # sideways share of the preferred direction per unit of predicted comfort shortfall (open space)
+)
 ANTICIPATION_MARGIN_M = 0.1  # the bend aims this far beyond the comfort distance (it fades to nothing at its aim)
 HALF_WIDTH_STEP_M = 0.05  # the passage half-width is resolved to this
 PERSONAL_MARGIN_M = 0.005  # a personal radius stays this far from touching anyone's (ORCA's collision branch)
@@ -191,7 +193,7 @@ def _anticipate_kernel(
             d = np.hypot(mx, my)
             away = 1.0 if mx * sx + my * sy < -1e-6 else -1.0
             push += away * max(aim - d, 0.0) / aim / (1.0 + t)
-        bx, by = hx + gain * push * sx, hy + gain * push * sy
+        bx, by = hx + gain[i] * push * sx, hy + gain[i] * push * sy
         norm = max(np.hypot(bx, by), 1e-9)
         out[i, 0], out[i, 1] = bx / norm * speed, by / norm * speed
     return out
@@ -204,6 +206,7 @@ def anticipate(
     comfort_distance: float,
     horizon: float,
     reach: float,
+    room: np.ndarray | None = None,
 ) -> np.ndarray:
     """Preferred velocities bent aside, early, from people who would pass closer than the comfort distance.
 
@@ -211,7 +214,9 @@ def anticipate(
     velocities (the walker at its preferred velocity) within ``horizon``; when it falls short of
     ``comfort_distance`` the walker's preferred direction gains a sideways component away from where
     the other will be, stronger the shorter the miss and the sooner it comes; people ``reach`` (the
-    model's neighbour distance) or farther away are left out. The speed is unchanged.
+    model's neighbour distance) or farther away are left out. The speed is unchanged. ``room`` (N,)
+    in [0, 1] scales each walker's bend (default 1; :func:`swerve_room`: people swerve early only
+    where there is room to).
     The crowd's hard constraints (ORCA at the personal radii of :func:`personal_radii`, walls, overlap
     resolution) still decide the velocity, so in a passage too narrow for comfort people simply pass at
     their body distance.
@@ -229,9 +234,20 @@ def anticipate(
         float(comfort_distance),
         float(horizon),
         float(reach),
-        ANTICIPATION_GAIN,
+        ANTICIPATION_GAIN * (np.ones(len(positions)) if room is None else np.asarray(room, np.float64)),
         ANTICIPATION_MARGIN_M,
     )
+
+
+@numba.njit(cache=True, nogil=True)
+def swerve_room(half_width: float, radius: float, comfort_distance: float) -> float:  # pragma: no cover
+    """How much of its early swerve a walker makes, 0–1.
+
+    All of it where the passage's half-width leaves half the comfort distance beyond its body, none where
+    the passage is only as wide as the body (in a narrow aisle a swerve only pushes people into the
+    furniture; ORCA still keeps them apart).
+    """
+    return min(max((half_width - radius) / (0.5 * comfort_distance), 0.0), 1.0)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -308,6 +324,7 @@ def _orca_velocities(
     distance, wall_comfort, horizon, horizon_obst = comfort
     n = len(positions)
     half_width, wall_radii, personal_comfort = np.empty(n), np.empty(n), np.empty(n)
+    gain = np.empty(n)
     for i in range(n):
         x, y = positions[i, 0], positions[i, 1]
         ax, ay = x + preferred[i, 0] * horizon_obst, y + preferred[i, 1] * horizon_obst
@@ -321,9 +338,10 @@ def _orca_velocities(
         # it only slows down to let someone pass
         going = 1.0 - HELD_UP_GIVE * min(max(held_up[i] - HELD_UP_S, 0.0) / HELD_UP_S, 1.0)
         personal_comfort[i] = radii[i] + (0.5 * distance - radii[i]) * going
+        gain[i] = ANTICIPATION_GAIN * swerve_room(half_width[i], radii[i], distance)
     bent = preferred
     if n >= 2:
-        bent = _anticipate_kernel(positions, velocities, preferred, distance, horizon, reach, ANTICIPATION_GAIN,
+        bent = _anticipate_kernel(positions, velocities, preferred, distance, horizon, reach, gain,
                                   ANTICIPATION_MARGIN_M)  # fmt: skip
     personal = _personal_kernel(positions, radii, max_speeds > 0, half_width, personal_comfort, PERSONAL_MARGIN_M)
     return step_kernel(positions, velocities, bent, personal, wall_radii, max_speeds, *tail)

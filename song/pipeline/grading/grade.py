@@ -105,6 +105,9 @@ class GradingResult:
     summary: dict
 
 
+EXTRA_DRAWS = 3  # a scene tries at most this many draws per episode of its quota
+
+
 def _scene_episodes(scene_id: str, scenes_dir: Path, run_dir: Path, config: SongConfig, quota: int):
     cfg = config.grading
     package = load_scene_package(scenes_dir / scene_id)
@@ -115,7 +118,9 @@ def _scene_episodes(scene_id: str, scenes_dir: Path, run_dir: Path, config: Song
     crowd = Crowd(tracks.ids, tracks.xy, tracks.fps)
     sampler = EpisodeSampler(robot, crowd, cfg, duration=crowd.duration)
     rows, infeasible = [], {}
-    for k in range(quota):
+    for k in range(EXTRA_DRAWS * quota):  # a draw that finds no episode is made up by a later one
+        if len(rows) == quota:
+            break
         rng = derive_rng(config.seed, scene_id, "grading", k)
         mode = MODES[int(rng.integers(len(MODES)))]
         draw, reason = sampler.draw(mode, rng)

@@ -114,12 +114,31 @@ def test_compiled_anticipation_equals_its_reference_twin() -> None:
         vel = rng.normal(0, 0.8, (n, 2))
         pref = rng.normal(0, 1.0, (n, 2))
         pref[rng.random(n) < 0.3] = 0.0  # some stand
+        room = rng.uniform(0, 1, n)
         for reach in (3.0, 50.0):  # some pairs beyond reach, then none
             np.testing.assert_allclose(
                 anticipate(pos, vel, pref, 1.0, 4.0, reach),
                 anticipate_reference(pos, vel, pref, 1.0, 4.0, reach),
                 atol=1e-12,
             )
+            np.testing.assert_allclose(
+                anticipate(pos, vel, pref, 1.0, 4.0, reach, room),
+                anticipate_reference(pos, vel, pref, 1.0, 4.0, reach, room),
+                atol=1e-12,
+            )
+        # no room: no swerve (the speed and direction stay the preferred ones)
+        np.testing.assert_allclose(anticipate(pos, vel, pref, 1.0, 4.0, 50.0, np.zeros(n)), pref, atol=1e-12)
+
+
+def test_swerve_room_by_passage_half_width() -> None:
+    """A walker swerves early in full with half the comfort distance beyond its body, not at all where the
+    passage is as wide as its body."""
+    from song.pipeline.crowd.avoidance import swerve_room
+
+    d = CFG.comfort_distance_m
+    assert swerve_room(R + 0.5 * d, R, d) == 1.0 and swerve_room(5.0, R, d) == 1.0
+    assert swerve_room(R, R, d) == 0.0 and swerve_room(0.1, R, d) == 0.0
+    assert swerve_room(R + 0.25 * d, R, d) == pytest.approx(0.5)
 
 
 def test_compiled_personal_radii_equal_their_reference_twin() -> None:
