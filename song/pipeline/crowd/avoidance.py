@@ -44,9 +44,7 @@ from song.pipeline.crowd.orca import ObstacleSet, OrcaParams, build_obstacles, k
 
 WALL_MARGIN_M = 0.005  # ORCA walls lie this much beyond the agent radius from the mesh
 ROOM_MARGIN_M = 0.01  # the wall comfort never reaches closer than this to a wall
-ANTICIPATION_GAIN = (
-    4.0  # sideways share of the preferred direction per unit of predicted comfort shortfall (open space)
-)
+ANTICIPATION_GAIN = 4.0  # sideways share of the heading per unit of predicted comfort shortfall (open space)
 ANTICIPATION_MARGIN_M = 0.1  # the bend aims this far beyond the comfort distance (it fades to nothing at its aim)
 HALF_WIDTH_STEP_M = 0.05  # the passage half-width is resolved to this
 PERSONAL_MARGIN_M = 0.005  # a personal radius stays this far from touching anyone's (ORCA's collision branch)
