@@ -6,7 +6,8 @@
 Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 ProcTHOR houses) and
 ``--generated`` more procedural scenes, for every avoidance model × speed profile asked for, and
 computes on the same footing the real ETH and Hotel sequences (EWAP obsmat files in ../shared; skipped
-with a reason when absent). Also per configuration: the closest centre distance at any frame (walking
+with a reason when absent) and, as an indoor check, the Edinburgh Informatics Forum atrium (automatic
+tracker, ~9 fps: its speeds are approximate and its pair distances unreliable). Also per configuration: the closest centre distance at any frame (walking
 or standing, against 2r), the share of intents that arrive, the walking share among present
 pedestrians per second between 5 s and 55 s (mean over scenes, and over the sample scenes alone: the
 target's set; the minimum second), and the crowd
@@ -33,7 +34,13 @@ from song.datasets.run import read_crowd, read_intents  # noqa: E402
 from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.datasets.scenes.generate import VENUE_ORDER, generate_scene  # noqa: E402
 from song.pipeline.chain import iter_run  # noqa: E402
-from song.pipeline.crowd.realism import Track, crowd_statistics, read_obsmat, stop_facing  # noqa: E402
+from song.pipeline.crowd.realism import (  # noqa: E402
+    Track,
+    crowd_statistics,
+    read_edinburgh_tracks,
+    read_obsmat,
+    stop_facing,
+)
 
 REAL = ROOT.parent / "shared" / "reference" / "pedestrians"
 SAMPLES = ROOT / "datasets" / "sample_scenes"
@@ -153,6 +160,10 @@ def main() -> None:
             rows[f"real {name.upper()}"] = (
                 crowd_statistics(read_obsmat(path)) if path.is_file() else {"skipped": f"{path} is absent"}
             )
+        path = REAL / "edinburgh_forum_tracks.01Aug.txt"  # indoor; speeds approximate, pair distances unreliable
+        rows["real Edinburgh Forum (indoor, approx.)"] = (
+            crowd_statistics(read_edinburgh_tracks(path)) if path.is_file() else {"skipped": f"{path} is absent"}
+        )
     finally:
         shutil.rmtree(work, ignore_errors=True)
     emit(rows)

@@ -196,6 +196,30 @@ def read_obsmat(path: str | Path) -> list[Track]:
     return tracks
 
 
+EDINBURGH_M_PER_PX = 0.0247  # the Forum camera's floor scale (the dataset's README: 24.7 mm per pixel)
+EDINBURGH_FPS = 9.0  # "about 9 frames per second" (the dataset's README; the rate varies, so speeds are approximate)
+
+
+def read_edinburgh_tracks(path: str | Path) -> list[Track]:
+    """Edinburgh Informatics Forum tracks (``TRACK.Rn=[[x y frame];...];``, image pixels) on the floor, m.
+
+    An indoor atrium seen from above by an automatic tracker: positions are ``EDINBURGH_M_PER_PX`` per
+    pixel and times ``frame / EDINBURGH_FPS``, so speeds carry the capture rate's error (it varies around
+    9 fps) and the tracker's jitter; pair distances are unreliable (fragmented, duplicated tracks).
+    """
+    import re
+
+    text = Path(path).read_text()
+    tracks = []
+    for body in re.findall(r"TRACK\.R\d+=\[(.*?)\]\];", text, re.S):
+        points = np.array([[float(v) for v in p.split()] for p in re.findall(r"\[([^\[\]]+)", body)])
+        points = points[np.argsort(points[:, 2], kind="stable")]
+        points = points[np.concatenate([[True], np.diff(points[:, 2]) > 0])]  # one point per frame
+        if len(points) >= 2:
+            tracks.append(Track(points[:, 2] / EDINBURGH_FPS, points[:, :2] * EDINBURGH_M_PER_PX))
+    return tracks
+
+
 def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_stay_s: float = 4.0) -> list[float]:
     """How far (deg) from its object each pedestrian faces while standing at it, one value per stay.
 

@@ -1,0 +1,79 @@
+"""Crowd statistics (song.pipeline.crowd.realism): one method on synthetic pairs with known answers and on
+the real reference sequences."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.pipeline.crowd.realism import (
+    Track,
+    crowd_statistics,
+    pass_distances,
+    read_edinburgh_tracks,
+    read_obsmat,
+    resample,
+)
+
+REAL = Path(__file__).resolve().parents[3].parent / "shared" / "reference" / "pedestrians"
+
+
+def walk(start, velocity, t0: float, t1: float, rate: float = 10.0) -> Track:
+    t = np.arange(t0, t1 + 1e-9, 1.0 / rate)
+    return Track(t, np.asarray(start, float) + (t - t0)[:, None] * np.asarray(velocity, float))
+
+
+def test_resample_puts_tracks_on_a_common_clock() -> None:
+    (track,) = resample([walk((0.0, 0.0), (1.0, 0.0), 0.13, 2.13)])  # samples 0.13, 0.23, ..., 2.13 s
+    np.testing.assert_allclose(track.t, np.arange(1, 6) / 2.5)  # multiples of 0.4 s inside the track
+    np.testing.assert_allclose(track.xy[:, 0], track.t - 0.13, atol=1e-12)
+    assert resample([walk((0.0, 0.0), (1.0, 0.0), 0.1, 0.3)]) == []  # shorter than two samples
+
+
+def test_head_on_and_crossing_pairs_pass_at_their_geometric_closest_approach() -> None:
+    """Closest approaches are refined between samples (the miss distance, not the nearest sample)."""
+    a = walk((0.0, 0.0), (1.3, 0.0), 0.0, 10.0)
+    b = walk((13.0, 0.7), (-1.3, 0.0), 0.0, 10.0)  # head-on, 0.7 m apart laterally
+    c = walk((6.5, -6.0), (0.0, 1.2), 0.0, 10.0)  # crosses a's line at x = 6.5 when a is there (t = 5 s)
+    passes = pass_distances(resample([a, b]))
+    assert len(passes["head_on"]) == 1 and passes["head_on"][0] == pytest.approx(0.7, abs=1e-9)
+    crossing = pass_distances(resample([a, c]))
+    assert len(crossing["crossing"]) == 1 and crossing["crossing"][0] == pytest.approx(0.0, abs=1e-9)
+    far = walk((0.0, 5.0), (1.3, 0.0), 0.0, 10.0)  # same direction, never within 2 m
+    assert len(pass_distances(resample([a, far]))["all"]) == 0
+
+
+def test_speed_and_standing_share() -> None:
+    walker = walk((0.0, 0.0), (1.25, 0.0), 0.0, 20.0)
+    stander = walk((0.0, 10.0), (0.0, 0.0), 0.0, 20.0)
+    stats = crowd_statistics([walker, stander])
+    assert stats["speed_median_mps"] == pytest.approx(1.25, abs=1e-9)
+    assert stats["standing_share"] == pytest.approx(0.5, abs=0.03)
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason=f"the real reference trajectories are not here ({REAL})")
+def test_real_sequences_read_as_their_readme_says() -> None:
+    """ETH from the EWAP obsmat: median walking speed 1.49 m/s (the shared README's figure); the indoor
+    Edinburgh atrium: 146 tracks, walking speed near 1.07 m/s at the nominal 9 fps."""
+    eth = crowd_statistics(read_obsmat(REAL / "ewap_seq_eth_obsmat.txt"))
+    assert eth["speed_median_mps"] == pytest.approx(1.49, abs=0.01)
+    forum = read_edinburgh_tracks(REAL / "edinburgh_forum_tracks.01Aug.txt")
+    assert len(forum) == 146
+    assert all(np.all(np.diff(track.t) > 0) for track in forum)
+    assert 0.9 < crowd_statistics(forum)["speed_median_mps"] < 1.25
+
+
+def test_edinburgh_reader_parses_pixels_and_frames(tmp_path: Path) -> None:
+    path = tmp_path / "tracks.txt"
+    path.write_text(
+        "% Total number of trajectories in file are  2\n\n"
+        "Properties.R1=[3 10 12 1.0 ];\n TRACK.R1=[[100 200 10];[110 200 11];[120 200 12]];\n"
+        "Properties.R2=[2 5 6 1.0 ];\n TRACK.R2=[[0 0 6];[0 40 5]];\n"
+    )
+    first, second = read_edinburgh_tracks(path)
+    np.testing.assert_allclose(first.t, np.array([10, 11, 12]) / 9.0)
+    np.testing.assert_allclose(first.xy, np.array([[100, 200], [110, 200], [120, 200]]) * 0.0247)
+    np.testing.assert_allclose(second.t, [5 / 9.0, 6 / 9.0])  # sorted by frame
+    np.testing.assert_allclose(second.xy[0], [0.0, 40 * 0.0247])
