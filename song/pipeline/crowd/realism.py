@@ -20,6 +20,7 @@ object pedestrians face while standing at it (no real reference: the annotations
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -207,8 +208,6 @@ def read_edinburgh_tracks(path: str | Path) -> list[Track]:
     pixel and times ``frame / EDINBURGH_FPS``, so speeds carry the capture rate's error (it varies around
     9 fps) and the tracker's jitter; pair distances are unreliable (fragmented, duplicated tracks).
     """
-    import re
-
     text = Path(path).read_text()
     tracks = []
     for body in re.findall(r"TRACK\.R\d+=\[(.*?)\]\];", text, re.S):

@@ -386,21 +386,9 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
     # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
     reach = max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M)
     rows, *inputs = avoidance_inputs(
-        w.pos,
-        w.vel,
-        w.cur,
-        w.nxt,
-        w.has_next,
-        w.goal,
-        w.speed,
-        moving,
-        r,
-        dt,
-        reach,
-        w.influence,
-        frame,
+        w.pos, w.vel, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, r, dt, reach, w.influence, frame,
         w.last_progress,
-    )
+    )  # fmt: skip
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
         w.pos, w.vel, rows, new_vel, moving, w.speed, dt, cfg.max_accel_mps2 * dt, 2 * r + OVERLAP_MARGIN_M, OVERLAP_PASSES,
