@@ -31,6 +31,7 @@ and a reason.
 from __future__ import annotations
 
 import heapq
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -45,6 +46,7 @@ NAVMESH_FORMAT = 1
 BUCKET_M = 0.5  # cell size of the spatial hash used for wall and triangle look-ups
 OFFSET_SLACK_M = 1e-4  # added to the inward offset: a strip exactly twice the offset wide must vanish, not
 # collapse into a zero-width bridge between two parts (at ε = 1 cell, one-cell strips are that wide)
+CARVINGS_KEPT = 256  # carvings a mesh remembers (:func:`carve_discs`; ~0.2 MB each with their query arrays)
 T_JUNCTION_M = 1e-9  # a vertex this close to the inside of a triangle edge splits the edge (see _triangulate)
 PathStatus = Literal["ok", "partial", "unreachable", "off_mesh"]
 
@@ -201,9 +203,13 @@ class Navmesh:
         """(S, 2) end points of the boundary segments, m."""
         return self.vertices[self.segments[:, 1]]
 
-    def _kernel(self) -> dict:
-        """Flat arrays for the compiled queries (:mod:`song.geometry._navmesh_kernel`), built once."""
-        if "kernel" not in self._cache:
+    def _hashes(self) -> tuple:
+        """``(grid, tstart, titems, sstart, sitems)``: spatial hashes of the triangles and walls, built once.
+
+        They depend only on the vertices, triangles and boundary segments, which never change after
+        :func:`navmesh_from_polygons` has triangulated them, so they outlive :func:`_forget_kernel`.
+        """
+        if "hashes" not in self._cache:
             verts = np.ascontiguousarray(self.vertices, dtype=np.float64)
             lo = verts.min(axis=0) - BUCKET_M if len(verts) else np.zeros(2)
             hi = verts.max(axis=0) + BUCKET_M if len(verts) else np.ones(2)
@@ -214,6 +220,14 @@ class Navmesh:
             margin = 1e-4  # beyond rounding: a ray meets every wall it touches in the cells it walks
             tstart, titems = _k.hash_boxes(tri.min(axis=1) - margin, tri.max(axis=1) + margin, lo, n, BUCKET_M)
             sstart, sitems = _k.hash_boxes(np.minimum(a, b) - margin, np.maximum(a, b) + margin, lo, n, BUCKET_M)
+            self._cache["hashes"] = (grid, tstart, titems, sstart, sitems)
+        return self._cache["hashes"]
+
+    def _kernel(self) -> dict:
+        """Flat arrays for the compiled queries (:mod:`song.geometry._navmesh_kernel`), built once."""
+        if "kernel" not in self._cache:
+            verts = np.ascontiguousarray(self.vertices, dtype=np.float64)
+            grid, tstart, titems, sstart, sitems = self._hashes()
             prev, nxt = _ring_links(len(verts), self.segments)
             e = self.vis_edges.reshape(-1, 2)
             length = np.hypot(*(verts[self.reflex[e[:, 0]]] - verts[self.reflex[e[:, 1]]]).T)
@@ -640,10 +654,20 @@ def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
         if lost.any():  # a sliver: fall back to the nearest triangle centroid
             centroid = vertices[triangles].mean(axis=1)
             mesh.seg_triangle[lost] = np.argmin(((probe[lost, None] - centroid[None]) ** 2).sum(-1), axis=1)
-    mesh._cache.clear()
+    _forget_kernel(mesh)  # the kernel arrays hold the boundary edges' triangles
     mesh.vis_edges = _visibility_edges(mesh)
-    mesh._cache.clear()  # the kernel arrays hold the visibility graph: rebuild them on first use
+    _forget_kernel(mesh)  # ... and the visibility graph: rebuild them on first use
     return mesh
+
+
+def _forget_kernel(mesh: Navmesh) -> None:
+    """Drop the kernel arrays derived from fields that :func:`navmesh_from_polygons` fills in late.
+
+    The spatial hashes stay (:meth:`Navmesh._hashes`): rebuilding them three times cost a third of
+    every carving (crowd stall replans).
+    """
+    for key in ("kernel", "args", "move_args"):
+        mesh._cache.pop(key, None)
 
 
 def build_navmesh(
@@ -738,6 +762,8 @@ def _component_rings(mesh: Navmesh) -> list[list[np.ndarray]]:
 def carve_discs(mesh: Navmesh, centres: np.ndarray, radius: float) -> Navmesh:
     """The mesh minus discs (Detour's temporary obstacles), re-triangulated.
 
+    The mesh remembers its last ``CARVINGS_KEPT`` carvings (treat them as read-only).
+
     Args:
         mesh: the navmesh.
         centres: (M, 2) float64 disc centres, m.
@@ -747,12 +773,21 @@ def carve_discs(mesh: Navmesh, centres: np.ndarray, radius: float) -> Navmesh:
     from shapely.geometry import Polygon
     from shapely.geometry.polygon import orient
 
+    centres = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 2)
+    key = (float(radius), centres.tobytes())
+    carvings = mesh._cache.setdefault("carvings", OrderedDict())
+    if key in carvings:  # a crowd replaying frames after a removal meets the same people standing again
+        carvings.move_to_end(key)
+        return carvings[key]
     if "region" not in mesh._cache:  # the mesh's polygons, the same for every carving (crowd replans)
         mesh._cache["region"] = shapely.union_all([Polygon(r[0], r[1:]) for r in _component_rings(mesh)])
     region = mesh._cache["region"]
     quad = 4
     grown = radius / np.cos(np.pi / (4 * quad))  # the 16-gon's edges touch the true circle
-    holes = shapely.union_all(shapely.buffer(shapely.points(np.asarray(centres).reshape(-1, 2)), grown, quad_segs=quad))
+    holes = shapely.union_all(shapely.buffer(shapely.points(centres), grown, quad_segs=quad))
     shape = region.difference(holes)
     parts = [orient(g, 1.0) for g in getattr(shape, "geoms", [shape]) if g.geom_type == "Polygon" and g.area > 1e-6]
-    return navmesh_from_polygons(sorted(parts, key=lambda g: g.bounds), mesh.params)
+    carvings[key] = navmesh_from_polygons(sorted(parts, key=lambda g: g.bounds), mesh.params)
+    if len(carvings) > CARVINGS_KEPT:
+        carvings.popitem(last=False)
+    return carvings[key]

@@ -162,3 +162,26 @@ def test_hole_touching_the_outer_contour_keeps_the_mesh(tmp_path) -> None:
     legal_area = legal_centres(package, 0.25).sum() * package.occupancy.resolution**2
     assert len(mesh.triangles) > 0
     assert 0.9 * legal_area < mesh.area <= 1.02 * legal_area
+
+
+def test_carvings_are_remembered_and_equal_a_fresh_build() -> None:
+    """A repeated carving returns the remembered mesh; its query arrays (spatial hashes kept through the
+    build) equal those of the same mesh rebuilt from its plain arrays, and paths keep clear of the discs."""
+    from song.geometry import navmesh as nm
+
+    room = orient(Polygon([(0, 0), (6, 0), (6, 4), (0, 4)]), 1.0)
+    mesh = navmesh_from_polygons([room], PARAMS)
+    discs = np.array([[3.0, 2.0], [3.0, 0.6]])
+    carved = nm.carve_discs(mesh, discs, 0.6)
+    assert nm.carve_discs(mesh, discs.copy(), 0.6) is carved
+    assert nm.carve_discs(mesh, discs, 0.5) is not carved
+    rebuilt = navmesh_from_arrays(navmesh_arrays(carved))
+    for mine, fresh in zip(carved._kernel_args(), rebuilt._kernel_args(), strict=True):
+        np.testing.assert_array_equal(mine, fresh)
+    res = carved.find_path(np.array([1.0, 2.0]), np.array([5.0, 2.0]), allow_partial=False)
+    assert res.status == "ok"
+    along = np.concatenate([np.linspace(a, b, 50) for a, b in zip(res.points[:-1], res.points[1:], strict=True)])
+    assert np.hypot(*(along[:, None] - discs[None]).transpose(2, 0, 1)).min() >= 0.6 - 1e-6
+    for k in range(nm.CARVINGS_KEPT + 1):  # the least recently used carving goes first
+        nm.carve_discs(mesh, np.array([[1.0 + 0.01 * k, 1.0]]), 0.3)
+    assert nm.carve_discs(mesh, discs, 0.6) is not carved
