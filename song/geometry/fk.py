@@ -129,9 +129,30 @@ def skinning_transforms(rest_joints: Any, local_quats: Any, root_pos: Any, paren
     return xp.cat([rots, trans[..., None]], dim=-1)
 
 
-def global_to_local(global_rots: np.ndarray, parents: np.ndarray = PARENTS) -> np.ndarray:
-    """Parent-local rotations ``(..., J, 3, 3)`` from global ones: ``q_j = R_parent^T · R_j``."""
-    global_rots = np.asarray(global_rots)
-    local = global_rots.copy()
-    local[..., 1:, :, :] = np.swapaxes(global_rots[..., parents[1:], :, :], -1, -2) @ global_rots[..., 1:, :, :]
+@numba.njit(cache=True, nogil=True)
+def _global_to_local_kernel(glob, parents):  # pragma: no cover - compiled
+    """(B, J, 3, 3) global rotations → parent-local ones (the root's unchanged)."""
+    b_count, n = glob.shape[0], glob.shape[1]
+    local = np.empty_like(glob)
+    for b in range(b_count):
+        local[b, 0] = glob[b, 0]
+        for j in range(1, n):
+            p = parents[j]
+            for r in range(3):
+                for c in range(3):
+                    s = 0.0
+                    for k in range(3):
+                        s += glob[b, p, k, r] * glob[b, j, k, c]
+                    local[b, j, r, c] = s
     return local
+
+
+def global_to_local(global_rots: np.ndarray, parents: np.ndarray = PARENTS) -> np.ndarray:
+    """Parent-local rotations ``(..., J, 3, 3)`` from global ones: ``q_j = R_parent^T · R_j``.
+
+    Compiled: numpy's stacked 3 × 3 products spent ~10 ms per pedestrian-minute in dispatch.
+    """
+    global_rots = np.asarray(global_rots, dtype=np.float64)
+    batch, n = global_rots.shape[:-3], global_rots.shape[-3]
+    flat = np.ascontiguousarray(global_rots).reshape(-1, n, 3, 3)
+    return _global_to_local_kernel(flat, np.asarray(parents, dtype=np.int64)).reshape(*batch, n, 3, 3)

@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from song.geometry.rotations import vector_norm
+
 # Relative slack kept from the fully stretched and fully folded configurations (keeps acos finite).
 _REACH_EPS = 1e-6
 
 
 def _unit(v: np.ndarray, fallback: np.ndarray | None = None) -> np.ndarray:
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    norm = vector_norm(v, keepdims=True)
     out = v / np.where(norm > 1e-12, norm, 1.0)
     if fallback is not None:
         out = np.where(norm > 1e-12, out, fallback)
@@ -67,10 +69,10 @@ def two_bone_ik(
         *(np.asarray(a, dtype=np.float64) for a in (root, mid, end, target, pole))
     )
     pole_old = pole if pole_old is None else np.broadcast_to(np.asarray(pole_old, dtype=np.float64), root.shape)
-    l1 = np.linalg.norm(mid - root, axis=-1, keepdims=True)
-    l2 = np.linalg.norm(end - mid, axis=-1, keepdims=True)
+    l1 = vector_norm(mid - root, keepdims=True)
+    l2 = vector_norm(end - mid, keepdims=True)
     to_target = target - root
-    dist = np.linalg.norm(to_target, axis=-1, keepdims=True)
+    dist = vector_norm(to_target, keepdims=True)
     d_hat = _unit(to_target, _unit(end - root))
     d = np.clip(dist, np.abs(l1 - l2) * (1 + _REACH_EPS) + 1e-9, (l1 + l2) * (1 - _REACH_EPS))
     cos_a = np.clip((l1 * l1 + d * d - l2 * l2) / (2.0 * l1 * d), -1.0, 1.0)

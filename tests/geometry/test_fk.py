@@ -74,3 +74,13 @@ def test_torch_fk_matches_numpy():
     assert np.abs(tr.numpy() - rots).max() < 1e-12
     ta = skinning_transforms(torch.tensor(rest), torch.tensor(quats), torch.tensor(root))
     assert np.abs(ta.numpy() - skinning_transforms(rest, quats, root)).max() < 1e-12
+
+
+@pytest.mark.parametrize("shape", [(), (7,), (3, 5)])
+def test_global_to_local_matches_the_matrix_formula(shape):
+    """The compiled kernel against ``q_j = R_parent^T · R_j`` in numpy, for any batch shape."""
+    rng = np.random.default_rng(4)
+    glob = quat_to_matrix(quat_normalize(rng.normal(size=(*shape, N_JOINTS, 4))))
+    twin = glob.copy()
+    twin[..., 1:, :, :] = np.swapaxes(glob[..., PARENTS[1:], :, :], -1, -2) @ glob[..., 1:, :, :]
+    np.testing.assert_allclose(global_to_local(glob), twin, atol=1e-14)

@@ -142,3 +142,11 @@ def test_compiled_conversions_equal_the_numpy_twins(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(rotations, "COMPILED_MIN", 256)
     np.testing.assert_allclose(rotations.quat_to_matrix(q), twin_m, rtol=0, atol=1e-15)
     np.testing.assert_allclose(rotations.matrix_to_quat(twin_m), twin_q, rtol=0, atol=1e-15)
+
+
+def test_vector_norm_matches_numpy():
+    rng = np.random.default_rng(5)
+    for shape in [(4,), (10, 3), (6, 24, 4), (0, 3)]:
+        v = rng.normal(size=shape)
+        np.testing.assert_allclose(r.vector_norm(v), np.linalg.norm(v, axis=-1), rtol=1e-15, atol=0)
+        assert r.vector_norm(v, keepdims=True).shape == (*shape[:-1], 1)

@@ -18,6 +18,7 @@ import numpy as np
 from song.datasets.run.layout import AMASS_FILE, MOTION_FILE, MOTION_META_FILE
 from song.errors import FormatError
 from song.geometry.fk import forward_kinematics
+from song.geometry.rotations import vector_norm
 from song.pipeline.motion.amass import to_amass, write_amass
 from song.pipeline.motion.types import Motion
 from song.util import write_json_atomic, write_npz_atomic
@@ -29,7 +30,7 @@ _KEYS = ("t", "frame", "height_m", "rest_joints", "local_quats", "root_pos", "jo
 
 def motion_arrays(motion: Motion) -> dict[str, np.ndarray]:
     """The ``motion.npz`` arrays; joints are FK of the *stored* float32 rotations and root."""
-    quats = motion.local_quats / np.linalg.norm(motion.local_quats, axis=-1, keepdims=True)
+    quats = motion.local_quats / vector_norm(motion.local_quats, keepdims=True)
     quats32 = quats.astype(np.float32)
     root32 = motion.root_pos.astype(np.float32)
     rest32 = motion.rest_joints.astype(np.float32)

@@ -32,6 +32,7 @@ from song.geometry.rotations import (
     quat_mul,
     quat_slerp,
     quat_to_matrix,
+    vector_norm,
     yaw_of_matrix,
 )
 from song.geometry.skeleton import JOINT_INDEX as J
@@ -227,13 +228,19 @@ def _lower_root(root: np.ndarray, hips: list[np.ndarray], targets: list[np.ndarr
     return out
 
 
-def lock_feet(motion: Motion, contacts: np.ndarray, blend_frames: int = 4) -> tuple[Motion, dict[str, float]]:
-    """Foot locking + ground clearance with two-bone leg IK (see the module docstring)."""
+def lock_feet(
+    motion: Motion, contacts: np.ndarray, blend_frames: int = 4, fk: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[Motion, dict[str, float]]:
+    """Foot locking + ground clearance with two-bone leg IK (see the module docstring).
+
+    ``fk``: the motion's ``(joints, global rotations)`` when the caller has them already.
+    """
     rest = motion.rest_joints
-    joints, glob = forward_kinematics(rest, motion.local_quats, motion.root_pos)
+    joints, glob = fk if fk is not None else forward_kinematics(rest, motion.local_quats, motion.root_pos)
     offsets = foot_offsets(joints, rest, contacts, blend_frames)
-    moved = np.linalg.norm(offsets, axis=-1) > 1e-7
-    corrected = float((np.linalg.norm(offsets, axis=-1) > 1e-3).any(axis=1).mean())
+    shift = vector_norm(offsets)
+    moved = shift > 1e-7
+    corrected = float((shift > 1e-3).any(axis=1).mean())
     if not moved.any():
         return replace(motion, contacts=contacts), {"feet_corrected_fraction": 0.0, "pelvis_lowered_max_m": 0.0}
     targets = [joints[:, ankle] + offsets[:, side] for side, (_, _, ankle, _) in enumerate(LEGS)]
@@ -292,10 +299,10 @@ def postprocess(
     aligned, figures = align_to_plan(motion, traj)
     resampled = resample_motion(aligned, traj.t, traj.frame)
     smoothed = smooth_motion(resampled, smoothing_sigma_frames)
-    joints = forward_kinematics(smoothed.rest_joints, smoothed.local_quats, smoothed.root_pos)[0]
-    contacts = detect_contacts(joints, smoothed.rest_joints, traj.fps, contact_height_m, contact_speed_mps)
+    fk = forward_kinematics(smoothed.rest_joints, smoothed.local_quats, smoothed.root_pos)
+    contacts = detect_contacts(fk[0], smoothed.rest_joints, traj.fps, contact_height_m, contact_speed_mps)
     if smoothed.contacts is not None:  # the generator's stance flags: a low, slow swing (a shuffle) is no contact
         contacts &= smoothed.contacts
-    final, lock_stats = lock_feet(smoothed, contacts, blend_frames)
-    final.local_quats = final.local_quats / np.linalg.norm(final.local_quats, axis=-1, keepdims=True)
+    final, lock_stats = lock_feet(smoothed, contacts, blend_frames, fk)
+    final.local_quats = final.local_quats / vector_norm(final.local_quats, keepdims=True)
     return final, {**{k: round(v, 6) for k, v in figures.items()}, **{k: round(v, 6) for k, v in lock_stats.items()}}

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from song.geometry.rotations import quat_to_axis_angle, quat_to_matrix, yaw_of_matrix
+from song.geometry.rotations import quat_to_axis_angle, quat_to_matrix, vector_norm, yaw_of_matrix
 from song.geometry.skeleton import JOINT_INDEX as J
 
 TOES = (J["left_foot"], J["right_foot"])
@@ -71,7 +71,7 @@ def feet_gap(joints: np.ndarray, samples: int = 5) -> np.ndarray:
     feet = []
     for ankle, toe in zip(ANKLES, TOES, strict=True):
         feet.append(joints[:, None, ankle] + w * (joints[:, None, toe] - joints[:, None, ankle]))
-    d = np.linalg.norm(feet[0][:, :, None] - feet[1][:, None, :], axis=-1)
+    d = vector_norm(feet[0][:, :, None] - feet[1][:, None, :])
     return d.min(axis=(1, 2))
 
 
