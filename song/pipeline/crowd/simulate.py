@@ -525,7 +525,8 @@ class _Run:
         self.xy, self.yaw, self.speed = np.zeros((n, frames, 2)), np.zeros((n, frames)), np.zeros((n, frames))
         self.xy[:, 0], self.yaw[:, 0] = w.pos, w.heading
         self.frame = 0  # the last frame recorded
-        self.snapshots = [(0, _snapshot(w))]
+        self.ids = np.arange(n)  # each walker's row in the first state (drops remove rows)
+        self.snapshots = [(0, _snapshot(w), self.ids)]  # (frame, state, the rows it holds)
         self.ghosts_from = np.inf  # the first frame a dropped pedestrian shaped someone's step
 
     def advance(self) -> dict[int, str]:
@@ -550,13 +551,13 @@ class _Run:
         record_frame(w.pos, w.vel, w.smooth, w.heading, w.face, turn, self.xy, self.yaw, self.speed, frame)
         self.frame = frame
         if frame % SNAPSHOT_EVERY == 0:
-            self.snapshots.append((frame, _snapshot(w)))
+            self.snapshots.append((frame, _snapshot(w), self.ids))
 
     def drop(self, gone: np.ndarray) -> None:
         """Drop pedestrians ``gone`` (N,) bool, returned by :meth:`advance`, and finish the frame without them."""
         keep = ~gone
         self.ghosts_from = min(self.ghosts_from, float(self.w.influence[gone].min()))
-        self.snapshots = [(f, _select(snap, keep)) for f, snap in self.snapshots]
+        self.ids = self.ids[keep]  # saved states keep everyone: a rewind selects the walkers left
         self.xy, self.yaw, self.speed = self.xy[keep], self.yaw[keep], self.speed[keep]
         self.w = _select(self.w, keep)
         self._record(self.frame + 1)
@@ -565,9 +566,9 @@ class _Run:
         """Roll back to before the dropped pedestrians mattered; False when they never did (the run stands)."""
         if np.isinf(self.ghosts_from):
             return False
-        self.snapshots = [(f, snap) for f, snap in self.snapshots if f < self.ghosts_from]
-        self.frame, snap = self.snapshots[-1]
-        self.w = _snapshot(snap)
+        self.snapshots = [saved for saved in self.snapshots if saved[0] < self.ghosts_from]
+        self.frame, snap, ids = self.snapshots[-1]
+        self.w = _snapshot(_select(snap, np.isin(ids, self.ids)))
         self.ghosts_from = np.inf
         return True
 
