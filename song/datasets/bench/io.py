@@ -48,12 +48,20 @@ class BlobStore:
     def __init__(self, release_root: Path) -> None:
         self.root = release_root
         self._known: dict[str, dict] = {}
+        self._digests: dict[Path, str] = {}
 
     def add(self, source: Path | None) -> dict | None:
-        """Copy ``source`` into the store (once per content) and return its ``{path, sha256, bytes}``."""
+        """Copy ``source`` into the store (once per content) and return its ``{path, sha256, bytes}``.
+
+        Each source file is hashed once per store: an avatar asset (~3 MB) is shared by many pedestrians,
+        and hashing it for each of them was most of a 500-scene export.
+        """
         if source is None or not source.is_file():
             return None
-        digest = sha256_file(source)
+        key = source.resolve()
+        if key not in self._digests:
+            self._digests[key] = sha256_file(source)
+        digest = self._digests[key]
         ext = "".join(source.suffixes[-1:])
         rel = BLOB_PATH.format(prefix=digest[:2], sha256=digest, ext=ext)
         if rel not in self._known:
