@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 import song
@@ -123,6 +122,18 @@ def _pedestrian_table(run: RunFolder, scene_ids: list[str]) -> pa.Table:
         parts.append(table.select(PEDESTRIANS.names).cast(PEDESTRIANS))
     table = pa.concat_tables(parts) if parts else PEDESTRIANS.empty_table()
     return table.sort_by([("scene_id", "ascending"), ("ped_id", "ascending"), ("frame", "ascending")])
+
+
+def _ped_ids_by_scene(pedestrians: pa.Table) -> dict[str, list[int]]:
+    """Each scene's pedestrian ids, ascending, in one pass over the table.
+
+    (A filter of the whole table per scene made a 500-scene export quadratic: 12 of its 35 s.)
+    """
+    pairs = pedestrians.select(["scene_id", "ped_id"]).group_by(["scene_id", "ped_id"]).aggregate([])
+    out: dict[str, list[int]] = {}
+    for scene_id, ped_id in zip(pairs.column("scene_id").to_pylist(), pairs.column("ped_id").to_pylist(), strict=True):
+        out.setdefault(scene_id, []).append(ped_id)
+    return {scene_id: sorted(ids) for scene_id, ids in out.items()}
 
 
 def _avatar_rows(
@@ -278,11 +289,10 @@ def export_bench(
         blobs = BlobStore(tmp)
         pedestrians = _pedestrian_table(run, scene_ids)
         avatar_rows, scene_rows = [], []
+        ped_ids = _ped_ids_by_scene(pedestrians)
         for scene_id in scene_ids:
             check_scene_unchanged(run.scene(scene_id), run_info.scenes_dir / scene_id)
-            mask = pc.equal(pedestrians.column("scene_id"), scene_id)
-            ped_ids = sorted(set(pedestrians.filter(mask).column("ped_id").to_pylist()))
-            avatar_rows += _avatar_rows(run, scene_id, ped_ids, blobs, amass)
+            avatar_rows += _avatar_rows(run, scene_id, ped_ids.get(scene_id, []), blobs, amass)
             scene_rows.append(_scene_row(run_info.scenes_dir, scene_id, blobs))
         tables = {
             "episodes": (EPISODES_PATH.format(part=0), episodes, EPISODES),
