@@ -87,7 +87,7 @@ def atomic_writer(path: str | Path, mode: str = "wb") -> Iterator[io.IOBase]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-", suffix=".tmp", dir=path.parent)
     os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the result the usual permissions
     try:
         with os.fdopen(fd, mode) as handle:
@@ -99,6 +99,27 @@ def atomic_writer(path: str | Path, mode: str = "wb") -> Iterator[io.IOBase]:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+_ABANDONED = re.compile(r"^\..+\.(\d+)-[a-z0-9_]+\.tmp$")  # atomic_writer's temporary names: .<name>.<pid>-<random>.tmp
+
+
+def remove_abandoned_writes(folder: str | Path) -> None:
+    """Delete the temporary files of :func:`atomic_writer` under ``folder`` whose process is gone.
+
+    A process killed with kill -9 during an atomic write leaves its temporary file behind (the target
+    itself is intact). Files of live processes, and anything else, are left alone.
+    """
+    for tmp in Path(folder).rglob(".*.tmp"):
+        match = _ABANDONED.match(tmp.name)
+        if match is None or tmp.is_symlink() or not tmp.is_file():
+            continue
+        try:
+            os.kill(int(match.group(1)), 0)
+        except ProcessLookupError:
+            tmp.unlink(missing_ok=True)
+        except (PermissionError, OverflowError):
+            pass  # alive (another user's), or not a pid
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:

@@ -70,3 +70,24 @@ def test_a_single_member_archive(tmp_path, name) -> None:
     util.write_npz_compressed_atomic(path, **{name: arrays()[name]})
     with np.load(path, allow_pickle=False) as data:
         np.testing.assert_array_equal(data[name], arrays()[name])
+
+
+def test_abandoned_atomic_writes_are_removed_and_live_ones_kept(tmp_path) -> None:
+    """A write killed mid-way leaves ``.<name>.<pid>-<random>.tmp``; only a dead process's file goes."""
+    import os
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    (tmp_path / "sub").mkdir()
+    abandoned = tmp_path / "sub" / f".stages.json.{dead_pid}-ab12_x9.tmp"
+    live = tmp_path / f".crowd.parquet.{os.getpid()}-zz99.tmp"
+    other = tmp_path / ".notes.tmp"
+    for path in (abandoned, live, other):
+        path.write_bytes(b"partial")
+    util.write_bytes_atomic(tmp_path / "kept.json", b"{}")
+    util.remove_abandoned_writes(tmp_path)
+    assert not abandoned.exists()
+    assert live.exists() and other.exists() and (tmp_path / "kept.json").read_bytes() == b"{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, "kept.json", "sub"])

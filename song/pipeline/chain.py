@@ -35,7 +35,14 @@ from song.datasets.run import RunFolder, RunInfo, SceneFolder, read_run_info, wr
 from song.datasets.scenes import ScenePackage, find_scene_packages, load_scene_package
 from song.errors import SongError, StageError
 from song.parallel import ExecutorName, parallel_map
-from song.util import derive_rng, read_json_object, sha256_file, sha256_json, write_json_atomic
+from song.util import (
+    derive_rng,
+    read_json_object,
+    remove_abandoned_writes,
+    sha256_file,
+    sha256_json,
+    write_json_atomic,
+)
 
 # Modules whose import registers the built-in stages (their order is derived from ``depends``).
 STAGE_MODULES = (
@@ -241,6 +248,7 @@ def run_scene(
         return SceneResult(scene_id=scene_root.name, status="failed", error=str(exc))
     folder = RunFolder(run_dir).scene(scene.scene_id)
     folder.root.mkdir(parents=True, exist_ok=True)
+    remove_abandoned_writes(folder.root)  # a run killed mid-write (kill -9) left a temporary file here
     record = read_json_object(folder.stages)
     scene_files = scene.content_hash()  # what the stages read (checked again by export-bench)
     result = SceneResult(scene_id=scene.scene_id, status="skipped")
