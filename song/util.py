@@ -114,12 +114,19 @@ def remove_abandoned_writes(folder: str | Path) -> None:
         match = _ABANDONED.match(tmp.name)
         if match is None or tmp.is_symlink() or not tmp.is_file():
             continue
-        try:
-            os.kill(int(match.group(1)), 0)
-        except ProcessLookupError:
+        if process_gone(int(match.group(1))):
             tmp.unlink(missing_ok=True)
-        except (PermissionError, OverflowError):
-            pass  # alive (another user's), or not a pid
+
+
+def process_gone(pid: int) -> bool:
+    """No process has this pid (its owner was killed); False while it runs, or may (another user's)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, OverflowError):
+        return False
+    return False
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> None:

@@ -40,7 +40,14 @@ from song.datasets.run.integrity import check_scene_unchanged
 from song.datasets.run.layout import AMASS_FILE, MOTION_META_FILE
 from song.datasets.scenes.package import GAUSSIANS, SEMANTIC_MAP, USD_PROXY, load_scene_package
 from song.errors import BenchmarkError, SongError
-from song.util import canonical_json, read_json_object, sha256_bytes, sha256_file, write_json_atomic
+from song.util import (
+    canonical_json,
+    process_gone,
+    read_json_object,
+    sha256_bytes,
+    sha256_file,
+    write_json_atomic,
+)
 
 
 @dataclass(frozen=True)
@@ -201,12 +208,8 @@ def _remove_abandoned(bench_dir: Path) -> None:
         pid = tmp.name.rpartition("-")[2]
         if not pid.isdigit() or not tmp.is_dir() or tmp.is_symlink():
             continue
-        try:
-            os.kill(int(pid), 0)
-        except ProcessLookupError:
+        if process_gone(int(pid)):
             shutil.rmtree(tmp, ignore_errors=True)
-        except PermissionError:
-            pass  # alive, another user's
 
 
 def _created() -> str:
