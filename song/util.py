@@ -169,12 +169,14 @@ def _deflated_zip(members: dict[str, bytes]) -> bytes:
     """
     from isal import isal_zlib
 
+    if len(members) >= 0xFFFF:  # more members than a plain end record counts
+        return _zipfile_deflated(members)
     local, central, offset = [], [], 0
     for name, data in members.items():
         packer = isal_zlib.compressobj(NPZ_DEFLATE_LEVEL, isal_zlib.DEFLATED, -15)  # raw deflate, as zip stores it
         packed = packer.compress(data) + packer.flush()
         crc, key = isal_zlib.crc32(data), name.encode("utf-8")
-        if max(len(data), len(packed), offset) >= _ZIP_LIMIT or len(members) >= 0xFFFF:
+        if max(len(data), len(packed), offset) >= _ZIP_LIMIT:
             return _zipfile_deflated(members)
         head = _ZIP_LOCAL.pack(0x04034B50, 20, 0, 8, 0, _ZIP_DATE, crc, len(packed), len(data), len(key), 0)
         central.append(
