@@ -107,8 +107,14 @@ ARM_HANG_DEG = 82.0  # the arms hang this far down from the T-pose (8° out from
 HANDS_ITERATIONS = 2  # corrections of the hands' planar solve by where the arm really puts them
 HANDS_INWARD_DEG = 15.0  # resting on a surface, the fingers point this far inward of straight ahead
 HANDS_RAMP_S = 1.0  # the arms move onto a counter, desk or table, and off it, over about this long
-HANDS_LEAN_DEG = np.array([5.0, 10.0, 15.0, 20.0])  # resting the hands there, the trunk leans the least of these
-HANDS_HEAD_DEG = 12.0  # that reaches, and the head looks down
+HANDS_LEAN_DEG = np.arange(5.0, 46.0, 5.0)  # resting the hands there, the trunk leans the least of these
+HANDS_HEAD_DEG = 12.0  # that reaches, and the head looks down this much and half the lean farther
+# Of that lean the hips take this share (the pelvis tilts forward) and the spine the rest: in forward
+# bending the lumbar spine and the hips contribute about equally over the first 40-60° (the lumbopelvic
+# rhythm; Esola et al. 1996, Spine 21:71). Bending at the hips lowers the shoulders more than the same
+# lean of the spine alone: every adult height then reaches a 0.9 m counter from the crowd's standing
+# spots (0.4-0.5 m away), where a spine-only lean of up to 20° reached it only up to 1.6 m, 0.4 m away.
+HANDS_HIP_SHARE = 0.5
 HANDS_SLACK_M = 0.03  # a surface counts as reachable from a lean when it would be from this much farther
 # Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
 # trunk and the pelvis (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999, Exp. Brain Res. 129:629).
@@ -307,8 +313,9 @@ class _Body:
     def hands_on_surface(self, traj: Trajectory, idle: np.ndarray, lean: float) -> tuple[np.ndarray, np.ndarray]:
         """How much (0-1) the body rests its hands on a counter, desk or table, and how far it leans (rad).
 
-        Per frame of ``traj.surface``: the least forward lean among ``HANDS_LEAN_DEG`` (the trunk pitched
-        from the pelvis up as the gait pitches it, on top of its own ``lean``) from which the standing
+        Per frame of ``traj.surface``: the least forward lean among ``HANDS_LEAN_DEG`` (on top of the
+        body's own ``lean``, which the spine takes; of the extra lean the hips take ``HANDS_HIP_SHARE``,
+        tilting the pelvis, and the spine the rest, as the gait pitches it) from which the standing
         body reaches the surface (:func:`song.pipeline.motion.postures.arm_on_surface`); both ramped
         on and off over ``HANDS_RAMP_S``.
         """
@@ -317,13 +324,14 @@ class _Body:
             return np.zeros(n), np.zeros(n)
         edge, height = traj.surface.T
         need = np.full(n, np.nan)
+        spine = {J["pelvis"]: 0.0, **{J[name]: w for name, w in SPINE_PITCH_SHARE}}
         for extra in np.radians(HANDS_LEAN_DEG)[::-1]:  # the least lean that reaches wins
             r, point = self.rest, self.rest[0].copy()
-            shares = {J["pelvis"]: 0.0, **{J[name]: w for name, w in SPINE_PITCH_SHARE}}
             for joint in _CHAIN["left"]:  # each offset turns with its parent's share of the chest's pitch
                 parent = PARENTS[joint]
-                share = shares.get(parent, 1.0)
-                point = point + rot_y(np.array([share * (lean + extra)]))[0] @ (r[joint] - r[parent])
+                share = spine.get(parent, 1.0)  # of the lean the hips do not take
+                pitch = share * lean + (HANDS_HIP_SHARE + (1.0 - HANDS_HIP_SHARE) * share) * extra
+                point = point + rot_y(np.array([pitch]))[0] @ (r[joint] - r[parent])
             # with some slack: the pose's own sway and breathing must not take the surface out of reach
             far = edge - self.hand_reach + HANDS_SLACK_M
             reach = arm_on_surface(far, height, point[[0, 2]], self.upper_arm, self.forearm)[2]
@@ -549,7 +557,9 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     turn_roll = -np.clip(0.8 * np.arctan(speed * plan.yaw_rate / _GRAVITY), -0.17, 0.17)
     lean = np.radians(style.lean_deg)
     pelvis_heading = _ahead(heading, t, PELVIS_LEAD_S)
-    rot_pelvis = rot_z(pelvis_heading + yaw_osc) @ rot_x(pelvic_list + 0.3 * turn_roll) @ rot_y(0.3 * lean * walk)
+    on_surface, surface_lean = body.hands_on_surface(traj, idle, 0.5 * lean)
+    tilt = 0.3 * lean * walk + HANDS_HIP_SHARE * on_surface * surface_lean
+    rot_pelvis = rot_z(pelvis_heading + yaw_osc) @ rot_x(pelvic_list + 0.3 * turn_roll) @ rot_y(tilt)
     pelvis = np.empty((n, 3))
     pelvis[:, :2] = traj.xy + sway[:, None] * left
     breathing = np.sin(2 * np.pi * 0.25 * t + style.idle_phase)
@@ -588,7 +598,6 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         glob[:, J[foot_name]] = rot_foot
 
     # trunk, head, arms
-    on_surface, surface_lean = body.hands_on_surface(traj, idle, 0.5 * lean)
     chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
     chest_pitch = chest_pitch + on_surface * surface_lean
     rot_chest = rot_z(_ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
@@ -596,7 +605,7 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
     glob[:, J["spine3"]] = rot_chest
     look = _ahead(heading, t, HEAD_LEAD_S) + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
-    head_pitch = np.radians(style.head_pitch_deg) + on_surface * np.radians(HANDS_HEAD_DEG)
+    head_pitch = np.radians(style.head_pitch_deg) + on_surface * (np.radians(HANDS_HEAD_DEG) + 0.5 * surface_lean)
     rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(head_pitch)
     glob[:, J["head"]] = rot_head
     glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)

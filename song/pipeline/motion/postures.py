@@ -26,6 +26,7 @@ STAY_NEAR_M = 0.3  # within this of a leg's goal (0.5 m of the start: its jitter
 STAND_MPS = 0.01  # slower than this counts as standing
 SETTLE_S = 1.5  # the hands go down after this long at the spot (the turn to face the object comes first)
 LEAVE_S = 0.5  # and are off the surface this long before the pedestrian walks on
+MIN_REST_S = 2.0  # a shorter rest is left alone: the hands take about a second to go on and one to come off
 ONTO_SURFACE_M = 0.05  # the hands rest this far beyond the edge
 PALM_M = 0.025  # the hand joint (mid-palm) lies this far above the surface
 LIFT_CLEAR_M, EDGE_CLEAR_M = 0.06, 0.05  # on the way, the hand comes up this far above the top, short of the edge
@@ -63,7 +64,7 @@ def surface_track(xy: np.ndarray, speed: np.ndarray, fps: float, stops: list, ob
         edges = np.flatnonzero(np.diff(np.concatenate([[0], at.astype(np.int8), [0]])))
         for start, end in zip(edges[::2], edges[1::2], strict=True):
             lo, hi = start + settle, end - leave
-            if hi - lo < fps:  # a stop shorter than a second of resting is left alone
+            if hi - lo < MIN_REST_S * fps:
                 continue
             outline = np.asarray(obj.footprint, dtype=np.float64)
             out[lo:hi, 0] = nearest_on_outline(outline, xy[lo:hi])[1]

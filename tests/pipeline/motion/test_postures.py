@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -36,7 +38,7 @@ def _standing(surface: np.ndarray) -> Trajectory:
                       surface)  # fmt: skip
 
 
-@pytest.mark.parametrize(("edge", "height"), [(0.2, 1.0), (0.35, 1.0), (0.3, 1.15), (0.3, 0.95)])
+@pytest.mark.parametrize(("edge", "height"), [(0.2, 1.0), (0.35, 1.0), (0.3, 1.15), (0.3, 0.95), (0.45, 0.9)])
 def test_gait_rests_both_hands_on_a_reachable_surface_and_clears_its_edge(edge: float, height: float) -> None:
     n = 240
     surface = np.full((n, 2), np.nan)
@@ -59,6 +61,40 @@ def test_gait_rests_both_hands_on_a_reachable_surface_and_clears_its_edge(edge: 
     assert rested >= 3
 
 
+@pytest.mark.parametrize("body_m", [1.5, 1.65, 1.8, 1.95])
+def test_bending_at_the_hips_every_adult_reaches_a_counter_from_the_crowds_spots(body_m: float) -> None:
+    """A 0.9 m counter 0.45 m away (the crowd stands 0.4-0.5 m from objects): both hands land on it, the
+    pelvis tilts forward while they rest (the hips take part of the lean) and is upright again after."""
+    n = 240
+    surface = np.full((n, 2), np.nan)
+    surface[60:180] = (0.45, 0.9)
+    motion = generate_gait(_standing(surface), replace(style_for(0, MotionConfig()), height_m=body_m))
+    joints, rots = motion.fk()
+    hands = joints[:, [J["left_hand"], J["right_hand"]]]
+    np.testing.assert_allclose(hands[90:150, :, 2], 0.9 + PALM_M, atol=0.005)
+    np.testing.assert_allclose(hands[90:150, :, 0], 0.45 + ONTO_SURFACE_M, atol=0.005)
+    tilt = np.degrees(np.arcsin(rots[:, J["pelvis"], 0, 2]))  # the pelvis's up axis, forward component
+    assert (tilt[90:150] > 5.0).all()
+    assert (np.abs(tilt[:30]) < 2.0).all() and (np.abs(tilt[-20:]) < 2.0).all()
+    beyond = hands[..., 0] > 0.45 + 0.005
+    assert (hands[..., 2][beyond] >= 0.9 + 0.01).all()
+
+
+def test_a_low_table_takes_the_hands_of_short_bodies_only_and_no_lean_without_them() -> None:
+    """A 0.75 m table 0.4 m away: within reach bending ≤ 45° for a 1.55 m body; a 1.9 m body stands upright."""
+    n = 240
+    surface = np.full((n, 2), np.nan)
+    surface[60:180] = (0.4, 0.75)
+    for body_m, reaches in ((1.55, True), (1.9, False)):
+        motion = generate_gait(_standing(surface), replace(style_for(0, MotionConfig()), height_m=body_m))
+        joints, rots = motion.fk()
+        hands = joints[:, [J["left_hand"], J["right_hand"]], 2]
+        on = np.abs(hands[90:150] - 0.75 - PALM_M).max() < 0.005
+        assert on == reaches
+        tilt = np.degrees(np.arcsin(rots[:, J["pelvis"], 0, 2]))
+        assert ((tilt[90:150] > 5.0).all()) == reaches
+
+
 def test_counter_stays_become_surface_frames_only_at_surfaces() -> None:
     square = [(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)]
     objects = {
@@ -79,13 +115,15 @@ def test_counter_stays_become_surface_frames_only_at_surfaces() -> None:
 
 
 def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
-    """On the sample scenes' crowds, pedestrians at reachable counters put both hands on them, and only there."""
+    """On the sample scenes' crowds, every stay at a counter of 0.9 m or more within 0.5 m (every adult
+    height reaches it bending at the hips) has both hands on it at its middle, and most stays at surfaces
+    of standing-work height (top ≥ 0.8 m) do."""
     from song.datasets.run import SceneFolder, read_intents
     from song.datasets.scenes import load_scene_package
     from song.pipeline.motion.stage import read_trajectories, with_surfaces
     from tests.conftest import SAMPLES
 
-    rested = 0
+    counters, standing_work = [], []
     for scene in sorted((sample_run / "scenes").iterdir()):
         folder = SceneFolder(scene)
         objects = load_scene_package(SAMPLES / scene.name).semantic_map.object_by_id()
@@ -93,12 +131,16 @@ def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
         for traj in trajectories:
             if traj.surface is None:
                 continue
-            held = np.isfinite(traj.surface[:, 0])
+            held = np.flatnonzero(np.isfinite(traj.surface[:, 0]))
             assert (traj.speed[held] < 0.01).all()  # only while standing
-            motion = generate_gait(traj, style_for(traj.ped_id, MotionConfig()))
-            joints = motion.joints
-            for f in np.flatnonzero(held)[:: 2 * FPS]:
-                hands = joints[f, [J["left_hand"], J["right_hand"]], 2]
-                if np.abs(hands - traj.surface[f, 1] - PALM_M).max() < 0.01:
-                    rested += 1
-    assert rested >= 5
+            joints = generate_gait(traj, style_for(traj.ped_id, MotionConfig())).joints
+            for stay in np.split(held, np.flatnonzero(np.diff(held) > 1) + 1):
+                middle = stay[len(stay) // 2]
+                edge, top = traj.surface[middle]
+                on = np.abs(joints[middle, [J["left_hand"], J["right_hand"]], 2] - top - PALM_M).max() < 0.01
+                if top >= 0.8:
+                    standing_work.append(on)
+                if top >= 0.9 and edge <= 0.5:
+                    counters.append(on)
+    assert len(counters) >= 10 and all(counters)
+    assert np.mean(standing_work) >= 0.85
