@@ -42,8 +42,20 @@ from song.geometry.ik import two_bone_ik
 from song.geometry.rotations import matrix_to_quat, quat_slerp, quat_to_matrix, rot_x, rot_y, rot_z, wrap_angle
 from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import PARENTS, rest_joints
-from song.pipeline.motion.postures import EDGE_CLEAR_M, LIFT_CLEAR_M, ONTO_SURFACE_M, PALM_M, arm_on_surface, arm_to
-from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw, rate_limited
+from song.pipeline.motion.postures import (
+    EDGE_CLEAR_M,
+    INTO_SHELF_M,
+    LIFT_CLEAR_M,
+    ONTO_SURFACE_M,
+    PALM_M,
+    REACH_FLEX_DEG,
+    SHOULDER_FLEX_DEG,
+    Browse,
+    arm_on_surface,
+    arm_to,
+    browse_plan,
+)
+from song.pipeline.motion.types import Motion, Trajectory, body_heading, held_rows, min_jerk, path_yaw, rate_limited
 
 # Walk ratio (step length / step frequency) is constant per person across speeds, 0.34-0.42 m·s in adults
 # around 0.38, and grows with body height (Sekiya & Nagasaki 1998, Gait Posture 7:225): the configured walk
@@ -115,6 +127,10 @@ HANDS_HEAD_DEG = 12.0  # that reaches, and the head looks down this much and hal
 # lean of the spine alone: every adult height then reaches a 0.9 m counter from the crowd's standing
 # spots (0.4-0.5 m away), where a spine-only lean of up to 20° reached it only up to 1.6 m, 0.4 m away.
 HANDS_HIP_SHARE = 0.5
+CHEST_GAZE_SHARE = 0.2  # browsing a shelf, the chest turns this share of the way the head looks
+# and the head turns toward the point looked at within these (the eyes do the rest; head rotation on
+# the trunk reaches ~70° and neck flexion ~50°, so these leave room)
+GAZE_YAW_DEG, GAZE_PITCH_DEG = (-45.0, 45.0), (-25.0, 40.0)  # left +, down +
 HANDS_SLACK_M = 0.03  # a surface counts as reachable from a lean when it would be from this much farther
 # Anticipatory steering: in walking turns the head turns first, ~0.2-0.25 s before the path, then the
 # trunk and the pelvis (Grasso et al. 1998, NeuroReport 9:1169; Patla et al. 1999, Exp. Brain Res. 129:629).
@@ -178,11 +194,6 @@ def cadence_steps_per_s(speed: np.ndarray, walk_ratio: float, min_cadence_spm: f
 def _smoothstep(x: np.ndarray) -> np.ndarray:
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
-
-
-def _min_jerk(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
 
 
 @dataclass
@@ -338,7 +349,7 @@ class _Body:
             need[reach] = extra
         sigma = HANDS_RAMP_S / 4.0 * traj.fps
         hold = gaussian_filter1d(np.isfinite(need).astype(np.float64), sigma, mode="nearest") * idle
-        return hold, gaussian_filter1d(np.nan_to_num(_held(need[:, None])[:, 0], nan=0.0), sigma, mode="nearest")
+        return hold, gaussian_filter1d(np.nan_to_num(held_rows(need[:, None])[:, 0], nan=0.0), sigma, mode="nearest")
 
 
 def _arm(rot_chest: np.ndarray, swing: np.ndarray, flex: np.ndarray, sign: float) -> tuple[np.ndarray, np.ndarray]:
@@ -347,68 +358,86 @@ def _arm(rot_chest: np.ndarray, swing: np.ndarray, flex: np.ndarray, sign: float
     return shoulder, shoulder @ rot_z(sign * flex)
 
 
-def _held(values: np.ndarray) -> np.ndarray:
-    """``values`` (T, K) with nan rows replaced by the nearest earlier finite row (the first one before it)."""
-    ok = np.isfinite(values[:, 0])
-    if not ok.any():
-        return values
-    last = np.maximum.accumulate(np.where(ok, np.arange(len(ok)), -1))
-    return values[np.where(last >= 0, last, np.argmax(ok))]
+class _PlanarArm:
+    """One arm solved in the body's sagittal plane from where its shoulder is in a pose.
+
+    ``glob`` holds the pelvis, spine and collar rotations (the trunk's lean included); the arm swings
+    in the chest's frame, which leans forward by ``chest_pitch`` (rad), so the planar solve's shoulder
+    flexion (from the vertical) is that swing less the lean. Each solve is a planar two-bone solve
+    (:func:`song.pipeline.motion.postures.arm_to`) corrected ``HANDS_ITERATIONS`` times by where the
+    arm, hanging slightly out to the side, really puts the wrist.
+    """
+
+    def __init__(
+        self, traj: Trajectory, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray,
+        side: str, sign: float, chest_pitch: np.ndarray,
+    ) -> None:  # fmt: skip
+        rest = body.rest
+        shoulder = pelvis.copy()
+        for joint in _CHAIN[side]:  # the shoulder's ancestors, pelvis first
+            parent = PARENTS[joint]
+            shoulder += np.einsum("tij,j->ti", glob[:, parent], rest[joint] - rest[parent])
+        self.traj, self.body, self.sign, self.chest_pitch = traj, body, sign, chest_pitch
+        self.shoulder, self.chest = shoulder, glob[:, J["spine3"]]
+        self.forward = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+        self.upper = rest[J[f"{side}_elbow"]] - rest[J[f"{side}_shoulder"]]
+        self.fore = rest[J[f"{side}_wrist"]] - rest[J[f"{side}_elbow"]]
+        self.local = np.stack([((shoulder[:, :2] - traj.xy) * self.forward).sum(-1), shoulder[:, 2]], axis=-1)
+
+    def wrist_at(self, flex_s: np.ndarray, flex_e: np.ndarray) -> np.ndarray:
+        """``(T, 2)`` the wrist's [distance ahead of the plan, height] for planar shoulder and elbow flexions."""
+        rot_s, rot_e = _arm(self.chest, flex_s + self.chest_pitch, flex_e, self.sign)
+        hand = self.shoulder + np.einsum("tij,j->ti", rot_s, self.upper) + np.einsum("tij,j->ti", rot_e, self.fore)
+        return np.stack([((hand[:, :2] - self.traj.xy) * self.forward).sum(-1), hand[:, 2]], axis=-1)
+
+    def solve(self, target: np.ndarray, flex_deg: tuple = SHOULDER_FLEX_DEG) -> tuple[np.ndarray, ...]:
+        """Shoulder flexion, elbow flexion (rad) and where possible, putting the wrist at ``target`` ``(T, 2)``."""
+        aim = target.copy()
+        for _ in range(HANDS_ITERATIONS):
+            flex_s, flex_e, possible = arm_to(*aim.T, self.local, self.body.upper_arm, self.body.forearm, flex_deg)
+            aim = aim - np.where(possible[:, None], self.wrist_at(flex_s, flex_e) - target, 0.0)
+        return arm_to(*aim.T, self.local, self.body.upper_arm, self.body.forearm, flex_deg)
 
 
-def _hands_on(
-    traj: Trajectory, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray, side: str,
-    sign: float, hold: np.ndarray, base_flex: float, chest_pitch: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def _hands_on(arm: _PlanarArm, hold: np.ndarray, base_flex: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shoulder flexion, elbow flexion (rad) and palm turn (0-1) of one arm going onto ``traj.surface`` by ``hold``.
 
     The hand follows a path in the sagittal plane as ``hold`` goes 0 → 1: from where it hangs up to
     ``LIFT_CLEAR_M`` above the top, ``EDGE_CLEAR_M`` short of the edge, then forward onto the surface
-    (leaving, back the same way), so it never passes through the edge. At every frame a planar
-    two-bone solve (:func:`song.pipeline.motion.postures.arm_to`) from where the shoulder is in this pose
-    (``glob`` holds the pelvis, spine and collar rotations: the trunk's lean is included), corrected
-    ``HANDS_ITERATIONS`` times by where the arm, hanging slightly out to the side, really puts the hand.
-    The arm swings in the chest's frame, which leans forward by ``chest_pitch`` (rad): the planar
-    solve's shoulder flexion (from the vertical) is that swing less the lean. The palm turns from facing
-    the thigh to lying flat as the hand moves over the surface. Where the surface is out of reach the
-    arm hangs as it would.
+    (leaving, back the same way), so it never passes through the edge; every frame is a
+    :meth:`_PlanarArm.solve`. The palm turns from facing the thigh to lying flat as the hand moves over
+    the surface. Where the surface is out of reach the arm hangs as it would.
     """
-    rest, n = body.rest, traj.n_frames
-    shoulder = pelvis.copy()
-    for joint in _CHAIN[side]:  # the shoulder's ancestors, pelvis first
-        parent = PARENTS[joint]
-        shoulder += np.einsum("tij,j->ti", glob[:, parent], rest[joint] - rest[parent])
-    forward = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-    upper = rest[J[f"{side}_elbow"]] - rest[J[f"{side}_shoulder"]]
-    fore = rest[J[f"{side}_wrist"]] - rest[J[f"{side}_elbow"]]
-    chest = glob[:, J["spine3"]]
-
-    def wrist_at(flex_s: np.ndarray, flex_e: np.ndarray) -> np.ndarray:  # (T, 2): forward of the plan, height
-        rot_s, rot_e = _arm(chest, flex_s + chest_pitch, flex_e, sign)
-        hand = shoulder + np.einsum("tij,j->ti", rot_s, upper) + np.einsum("tij,j->ti", rot_e, fore)
-        return np.stack([((hand[:, :2] - traj.xy) * forward).sum(-1), hand[:, 2]], axis=-1)
-
-    def solve(target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        aim = target.copy()
-        for _ in range(HANDS_ITERATIONS):
-            flex_s, flex_e, possible = arm_to(*aim.T, local, body.upper_arm, body.forearm)
-            aim = aim - np.where(possible[:, None], wrist_at(flex_s, flex_e) - target, 0.0)
-        return arm_to(*aim.T, local, body.upper_arm, body.forearm)
-
-    local = np.stack([((shoulder[:, :2] - traj.xy) * forward).sum(-1), shoulder[:, 2]], axis=-1)
-    end = _held(traj.surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
-    ramp = np.minimum(hold, gaussian_filter1d(solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps))
+    traj, body, chest_pitch = arm.traj, arm.body, arm.chest_pitch
+    end = held_rows(traj.surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
+    ramp = np.minimum(hold, gaussian_filter1d(arm.solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps))
     ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * traj.fps))  # the last turning step ends at once
-    hanging = wrist_at(-chest_pitch, np.full(n, base_flex))
+    hanging = arm.wrist_at(-chest_pitch, np.full(traj.n_frames, base_flex))
     lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] + body.hand_reach - ONTO_SURFACE_M - EDGE_CLEAR_M),
                      end[:, 1] + LIFT_CLEAR_M], axis=-1)  # fmt: skip
     up, over = _smoothstep(np.clip(2.0 * ramp, 0.0, 1.0)), _smoothstep(np.clip(2.0 * ramp - 1.0, 0.0, 1.0))
     path = np.where(
         (ramp < 0.5)[:, None], hanging + up[:, None] * (lift - hanging), lift + over[:, None] * (end - lift)
     )
-    flex_s, flex_e, possible = solve(path)
+    flex_s, flex_e, possible = arm.solve(path)
     w = np.where(possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 0.0)  # from the hanging arm's own angles
     return w * (flex_s + chest_pitch), (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
+
+
+def _touch_shelf(arm: _PlanarArm, browse: Browse, reach: np.ndarray, base_flex: float) -> tuple[np.ndarray, np.ndarray]:
+    """Shoulder and elbow flexion (rad) of one arm touching the item looked at on ``traj.shelf`` by ``reach``.
+
+    The wrist's target lies a hand's length short of ``INTO_SHELF_M`` past the shelf's front, at the
+    height looked at; the arm's angles go there from the hanging arm's in proportion to ``reach``
+    (minimum-jerk in :func:`song.pipeline.motion.postures.browse_plan`), so the hand comes up and
+    forward without passing through the shelf. Out of reach (a shelf too far), the arm hangs.
+    """
+    traj, body = arm.traj, arm.body
+    front = held_rows(traj.shelf)[:, 0]
+    target = np.stack([front + INTO_SHELF_M - body.hand_reach, browse.look[:, 1]], axis=-1)
+    flex_s, flex_e, possible = arm.solve(target, REACH_FLEX_DEG)
+    w = np.where(possible, reach, 0.0)
+    return w * (flex_s + arm.chest_pitch), (1.0 - w) * base_flex + w * flex_e
 
 
 def _foot_poses(
@@ -456,7 +485,7 @@ def _foot_poses(
     # foot trailed the body and the hip over-extended); cut before its end (the foot still moving at
     # touchdown) it took 5° more off the hip range at 1.4 m/s but bent the knee at heel strike and the toe
     # skimmed the floor (benchmarks/motion.py --normative)
-    progress = _min_jerk(sigma)
+    progress = min_jerk(sigma)
     distance = np.linalg.norm(end[:, :2] - start[:, :2], axis=1)
     lift = np.clip(SWING_LIFT[0] + SWING_LIFT[1] * distance, SWING_LIFT[0], SWING_LIFT[2]) * h_scale
     toe_travel = distance + np.linalg.norm(body.ankle_off[:2]) * np.abs(wrap_angle(cur[:, 2] - prev[:, 2]))
@@ -600,12 +629,22 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     # trunk, head, arms
     chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
     chest_pitch = chest_pitch + on_surface * surface_lean
-    rot_chest = rot_z(_ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc) @ rot_x(turn_roll) @ rot_y(chest_pitch)
+    browse = None if traj.shelf is None else browse_plan(traj.shelf, traj.fps, traj.ped_id)
+    browsing, gaze_yaw, gaze_pitch = np.zeros(n), np.zeros(n), np.zeros(n)
+    if browse is not None:  # the head turns to the point looked at on the shelf, the chest a little
+        front = held_rows(traj.shelf)[:, 0]
+        browsing = browse.on * idle
+        gaze_yaw = np.clip(np.arctan2(browse.look[:, 0], front), *np.radians(GAZE_YAW_DEG))
+        gaze_pitch = np.clip(np.arctan2(rest[J["head"], 2] - browse.look[:, 1], front), *np.radians(GAZE_PITCH_DEG))
+    chest_yaw = _ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc + CHEST_GAZE_SHARE * browsing * gaze_yaw
+    rot_chest = rot_z(chest_yaw) @ rot_x(turn_roll) @ rot_y(chest_pitch)
     for name, w in SPINE_PITCH_SHARE:
         glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
     glob[:, J["spine3"]] = rot_chest
-    look = _ahead(heading, t, HEAD_LEAD_S) + idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)
+    wander = idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)  # looking around
+    look = _ahead(heading, t, HEAD_LEAD_S) + (1.0 - browsing) * wander + browsing * gaze_yaw
     head_pitch = np.radians(style.head_pitch_deg) + on_surface * (np.radians(HANDS_HEAD_DEG) + 0.5 * surface_lean)
+    head_pitch = head_pitch + browsing * gaze_pitch
     rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(head_pitch)
     glob[:, J["head"]] = rot_head
     glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)
@@ -616,9 +655,13 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
         on_shoulder, flex, palm = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg)), np.zeros(n)
         if on_surface.any():
-            on_shoulder, flex, palm = _hands_on(
-                traj, body, glob, pelvis, heading, prefix, sign, on_surface, flex[0], chest_pitch
-            )
+            arm = _PlanarArm(traj, body, glob, pelvis, heading, prefix, sign, chest_pitch)
+            on_shoulder, flex, palm = _hands_on(arm, on_surface, flex[0])
+        if browse is not None and browse.reach.any():
+            arm = _PlanarArm(traj, body, glob, pelvis, heading, prefix, sign, chest_pitch)
+            touch = browse.reach * idle * (browse.left == (prefix == "left"))
+            touching, bent = _touch_shelf(arm, browse, touch, flex[0])
+            on_shoulder, flex = np.where(touch > 0.0, touching, on_shoulder), np.where(touch > 0.0, bent, flex)
         flex = flex + 0.5 * np.maximum(swing, 0.0)
         shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
         # resting, the hand lies flat on the surface, fingers forward and a little inward (the T-pose's palms face down)

@@ -18,7 +18,7 @@ from song.pipeline.motion.amass import HAND_SLOTS, pelvis_j0
 from song.pipeline.motion.generators import MotionGenerator, ProceduralGait, make_generator
 from song.pipeline.motion.io import MOTION_FORMAT, MOTION_VERSION, write_motion
 from song.pipeline.motion.postprocess import postprocess
-from song.pipeline.motion.postures import STAY_NEAR_M, surface_track
+from song.pipeline.motion.postures import STAY_NEAR_M, shelf_track, surface_track
 from song.pipeline.motion.quality import motion_quality
 from song.pipeline.motion.types import Motion, Trajectory
 
@@ -63,21 +63,24 @@ def _intents_by_id(scene: SceneFolder) -> dict:
         return {}
 
 
-def with_surfaces(trajectories: list[Trajectory], intents: dict, objects: dict) -> list[Trajectory]:
-    """The trajectories with the counters, desks and tables their pedestrians rest their hands on.
+def with_stays(trajectories: list[Trajectory], intents: dict, objects: dict) -> list[Trajectory]:
+    """The trajectories with the surfaces their pedestrians rest their hands on and the shelves they browse.
 
     Stops: the intent's start object (within 0.5 m of its start: the crowd jitters starts) and each
-    leg's object (within ``STAY_NEAR_M`` of its goal); see :func:`song.pipeline.motion.postures.surface_track`.
+    leg's object (within ``STAY_NEAR_M`` of its goal); see :func:`song.pipeline.motion.postures.stay_track`.
     """
     out = []
     for traj in trajectories:
         intent = intents.get(traj.ped_id)
-        surface = None
         if intent is not None:
             stops = [(intent.start_object, intent.start_xy, 0.5)]
             stops += [(leg.goal_object, leg.goal_xy, STAY_NEAR_M) for leg in intent.route()]
-            surface = surface_track(traj.xy, traj.speed, traj.fps, stops, objects)
-        out.append(traj if surface is None else replace(traj, surface=surface))
+            traj = replace(
+                traj,
+                surface=surface_track(traj.xy, traj.speed, traj.fps, stops, objects),
+                shelf=shelf_track(traj.xy, traj.speed, traj.fps, stops, objects),
+            )
+        out.append(traj)
     return out
 
 
@@ -163,7 +166,7 @@ def run_motion(ctx: StageContext) -> list[str]:
     ids = [traj.ped_id for traj in trajectories]
     seeds = [int(ctx.rng(ped_id).integers(0, 2**63 - 1)) for ped_id in ids]
     intents = _intents_by_id(scene)
-    trajectories = with_surfaces(trajectories, intents, ctx.scene.semantic_map.object_by_id())
+    trajectories = with_stays(trajectories, intents, ctx.scene.semantic_map.object_by_id())
     activities = [intents[i].activity if i in intents else "" for i in ids]
     results = synthesize_motions(trajectories, activities, seeds, cfg)
     keep = {traj_dir_name(i) for i in ids}

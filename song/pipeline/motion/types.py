@@ -30,6 +30,21 @@ def _rate_limited(values: np.ndarray, steps: np.ndarray) -> np.ndarray:  # pragm
     return 0.5 * (forward + backward)
 
 
+def held_rows(values: np.ndarray) -> np.ndarray:
+    """``values`` (T, K) with nan rows replaced by the nearest earlier finite row (the first one before it)."""
+    ok = np.isfinite(values[:, 0])
+    if not ok.any():
+        return values
+    last = np.maximum.accumulate(np.where(ok, np.arange(len(ok)), -1))
+    return values[np.where(last >= 0, last, np.argmax(ok))]
+
+
+def min_jerk(x: np.ndarray) -> np.ndarray:
+    """The minimum-jerk profile ``10x³ - 15x⁴ + 6x⁵`` of progress ``x`` (clipped to 0-1)."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+
+
 def rate_limited(values: np.ndarray, max_step: float) -> np.ndarray:
     """``values`` (T,) changing by at most ``max_step`` per sample; a jump becomes a ramp centred on it."""
     values = np.ascontiguousarray(values, dtype=np.float64)
@@ -63,6 +78,8 @@ class Trajectory:
         surface: ``(T, 2)`` float64 [horizontal distance to its edge m, height m] of a counter, desk
             or table the pedestrian rests its hands on at that frame, nan elsewhere; None: never
             (:mod:`song.pipeline.motion.postures`; generators may ignore it).
+        shelf: ``(T, 2)`` float64 [horizontal distance to its front m, top height m] of a shelf the
+            pedestrian browses at that frame, nan elsewhere; None: never (as ``surface``).
     """
 
     ped_id: int
@@ -72,6 +89,7 @@ class Trajectory:
     yaw: np.ndarray
     speed: np.ndarray
     surface: np.ndarray | None = None
+    shelf: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -81,8 +99,10 @@ class Trajectory:
             raise InputError(CROWD_FILE, f"ped_id={self.ped_id}.t", "times must be strictly increasing")
         if not (np.all(np.isfinite(self.xy)) and np.all(np.isfinite(self.yaw))):
             raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", "non-finite x, y or yaw")
-        if self.surface is not None and self.surface.shape != (n, 2):
-            raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", "surface must be (T, 2)")
+        for name in ("surface", "shelf"):
+            value = getattr(self, name)
+            if value is not None and value.shape != (n, 2):
+                raise InputError(CROWD_FILE, f"ped_id={self.ped_id}", f"{name} must be (T, 2)")
 
     @property
     def n_frames(self) -> int:

@@ -11,7 +11,17 @@ from song.config import MotionConfig
 from song.datasets.scenes.model import SceneObject
 from song.geometry.skeleton import JOINT_INDEX as J
 from song.pipeline.motion.gait import generate_gait, style_for
-from song.pipeline.motion.postures import ONTO_SURFACE_M, PALM_M, arm_on_surface, is_surface, surface_track
+from song.pipeline.motion.postures import (
+    INTO_SHELF_M,
+    ONTO_SURFACE_M,
+    PALM_M,
+    arm_on_surface,
+    browse_plan,
+    is_shelf,
+    is_surface,
+    shelf_track,
+    surface_track,
+)
 from song.pipeline.motion.types import Trajectory
 
 FPS = 30
@@ -114,20 +124,85 @@ def test_counter_stays_become_surface_frames_only_at_surfaces() -> None:
     assert surface_track(xy, speed, FPS, [("shelf_1", (0.7, 0.0), 0.3), ("desk_low", (0.7, 0.0), 0.3)], objects) is None
 
 
+def test_shelf_stays_become_browsing_frames_only_at_tall_shelves() -> None:
+    square = [(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)]
+    objects = {
+        "shelf_1": SceneObject(id="shelf_1", label="shelf", category="storage", footprint=square, z_max=1.9),
+        "low": SceneObject(id="low", label="shelving unit", category="storage", footprint=square, z_max=0.7),
+        "counter_1": SceneObject(id="counter_1", label="counter", category="furniture", footprint=square, z_max=1.0),
+    }
+    assert [is_shelf(o) for o in objects.values()] == [True, False, False]
+    n = 300
+    xy = np.zeros((n, 2))
+    xy[:, 0] = np.clip(np.arange(n) / FPS * 0.5, 0.0, 0.55)
+    speed = np.r_[np.full(33, 0.5), np.zeros(n - 33)]
+    track = shelf_track(xy, speed, FPS, [("shelf_1", (0.55, 0.0), 0.3)], objects)
+    held = np.isfinite(track[:, 0])
+    assert held[100:250].all() and not held[:33].any() and not held[-10:].any()
+    np.testing.assert_allclose(track[held], [[0.45, 1.9]] * int(held.sum()))
+    assert shelf_track(xy, speed, FPS, [("low", (0.55, 0.0), 0.3), ("counter_1", (0.55, 0.0), 0.3)], objects) is None
+
+
+def _browsing(n: int = 600) -> Trajectory:
+    shelf = np.full((n, 2), np.nan)
+    shelf[60:540] = (0.45, 1.9)
+    return Trajectory(3, np.arange(n) / FPS, np.arange(n, dtype=np.int32), np.zeros((n, 2)), np.zeros(n),
+                      np.zeros(n), None, shelf)  # fmt: skip
+
+
+def test_browse_plan_is_deterministic_and_touches_only_at_reachable_points() -> None:
+    traj = _browsing()
+    a, b, c = (browse_plan(traj.shelf, FPS, seed) for seed in (3, 3, 4))
+    for name in ("on", "look", "reach", "left"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(a.look, c.look)
+    for plan in (a, c):
+        held = np.isfinite(traj.shelf[:, 0])
+        assert (plan.reach[~held] == 0.0).all() and (plan.on[:20] < 0.01).all() and (plan.on[-20:] < 0.01).all()
+        assert (np.abs(plan.look[held, 0]) <= 0.6).all() and (plan.look[held, 1] <= 1.8).all()
+        touching = plan.reach > 0.0
+        assert (plan.left[touching] == (plan.look[touching, 0] >= 0.0)).all()  # the hand on the side looked at
+        assert (np.abs(plan.look[touching, 0]) <= 0.35).all()
+        assert (np.abs(np.diff(plan.look[:, 1])) < 0.1).all()  # the gaze moves, it does not jump
+
+
+def test_browsing_turns_the_head_along_the_shelf_and_a_hand_touches_an_item() -> None:
+    """A 16 s stay at a shelf 0.45 m away: the head looks left, right, up and down within its limits, a
+    hand touches the shelf's front where the gaze is and never goes deep into it, arms hang outside."""
+    traj = _browsing()
+    plan = browse_plan(traj.shelf, FPS, traj.ped_id)
+    assert (plan.reach >= 0.999).any()
+    joints, rots = generate_gait(traj, style_for(3, MotionConfig())).fk()
+    face = rots[:, J["head"]] @ np.array([1.0, 0.0, 0.0])
+    yaw, down = np.degrees(np.arctan2(face[:, 1], face[:, 0])), np.degrees(np.arcsin(-face[:, 2]))
+    assert yaw[60:540].max() > 20.0 and yaw[60:540].min() < -20.0 and (np.abs(yaw) <= 45.5).all()
+    assert down[60:540].max() - down[60:540].min() > 20.0
+    hands = joints[:, [J["left_hand"], J["right_hand"]]]
+    side = np.where(plan.left, 0, 1)
+    full = np.flatnonzero(plan.reach >= 0.999)
+    touch = hands[full, side[full]]
+    np.testing.assert_allclose(touch[:, 0], 0.45 + INTO_SHELF_M, atol=0.04)
+    np.testing.assert_allclose(touch[:, 2], plan.look[full, 1], atol=0.06)
+    assert (hands[..., 0] <= 0.45 + INTO_SHELF_M + 0.02).all()
+    assert (hands[:50, :, 2] < 1.0).all() and (hands[-50:, :, 2] < 1.0).all()
+    still = plan.reach == 0.0  # between touches both arms hang
+    assert (hands[still, :, 2] < 1.0).all()
+
+
 def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
     """On the sample scenes' crowds, every stay at a counter of 0.9 m or more within 0.5 m (every adult
     height reaches it bending at the hips) has both hands on it at its middle, and most stays at surfaces
     of standing-work height (top ≥ 0.8 m) do."""
     from song.datasets.run import SceneFolder, read_intents
     from song.datasets.scenes import load_scene_package
-    from song.pipeline.motion.stage import read_trajectories, with_surfaces
+    from song.pipeline.motion.stage import read_trajectories, with_stays
     from tests.conftest import SAMPLES
 
     counters, standing_work = [], []
     for scene in sorted((sample_run / "scenes").iterdir()):
         folder = SceneFolder(scene)
         objects = load_scene_package(SAMPLES / scene.name).semantic_map.object_by_id()
-        trajectories = with_surfaces(read_trajectories(folder.crowd), read_intents(folder.intents).by_id(), objects)
+        trajectories = with_stays(read_trajectories(folder.crowd), read_intents(folder.intents).by_id(), objects)
         for traj in trajectories:
             if traj.surface is None:
                 continue
@@ -144,3 +219,26 @@ def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
                     counters.append(on)
     assert len(counters) >= 10 and all(counters)
     assert np.mean(standing_work) >= 0.85
+
+
+def test_sample_crowds_browse_shelves(sample_run) -> None:
+    """On the sample scenes' crowds, pedestrians stay at shelves long enough to browse, and some touch items."""
+    from song.datasets.run import SceneFolder, read_intents
+    from song.datasets.scenes import load_scene_package
+    from song.pipeline.motion.stage import read_trajectories, with_stays
+    from tests.conftest import SAMPLES
+
+    browsing = touches = 0
+    for scene in sorted((sample_run / "scenes").iterdir()):
+        folder = SceneFolder(scene)
+        objects = load_scene_package(SAMPLES / scene.name).semantic_map.object_by_id()
+        for traj in with_stays(read_trajectories(folder.crowd), read_intents(folder.intents).by_id(), objects):
+            if traj.shelf is None:
+                continue
+            held = np.isfinite(traj.shelf[:, 0])
+            assert (traj.speed[held] < 0.01).all()
+            if traj.surface is not None:  # a stay is at a surface or at a shelf, never both
+                assert not (held & np.isfinite(traj.surface[:, 0])).any()
+            browsing += 1
+            touches += int((browse_plan(traj.shelf, traj.fps, traj.ped_id).reach >= 0.999).any())
+    assert browsing >= 5 and touches >= 2
