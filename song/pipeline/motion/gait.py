@@ -120,7 +120,7 @@ HANDS_ITERATIONS = 2  # corrections of the hands' planar solve by where the arm 
 HANDS_INWARD_DEG = 15.0  # resting on a surface, the fingers point this far inward of straight ahead
 HANDS_RAMP_S = 1.0  # the arms move onto a counter, desk or table, and off it, over about this long
 HANDS_LEAN_DEG = np.arange(5.0, 46.0, 5.0)  # resting the hands there, the trunk leans the least of these
-HANDS_HEAD_DEG = 12.0  # that reaches, and the head looks down this much and half the lean farther
+HANDS_HEAD_DEG = 12.0  # that reaches; at a surface the head looks down this much (and half the lean farther)
 # Of that lean the hips take this share (the pelvis tilts forward) and the spine the rest: in forward
 # bending the lumbar spine and the hips contribute about equally over the first 40-60° (the lumbopelvic
 # rhythm; Esola et al. 1996, Spine 21:71). Bending at the hips lowers the shoulders more than the same
@@ -643,7 +643,11 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     glob[:, J["spine3"]] = rot_chest
     wander = idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)  # looking around
     look = _ahead(heading, t, HEAD_LEAD_S) + (1.0 - browsing) * wander + browsing * gaze_yaw
-    head_pitch = np.radians(style.head_pitch_deg) + on_surface * (np.radians(HANDS_HEAD_DEG) + 0.5 * surface_lean)
+    head_pitch = np.radians(style.head_pitch_deg) + on_surface * 0.5 * surface_lean
+    if traj.surface is not None:  # at a surface, within reach or not, the head looks down at it
+        at = np.isfinite(traj.surface[:, 0]).astype(np.float64)
+        at = gaussian_filter1d(at, HANDS_RAMP_S / 4.0 * traj.fps, mode="nearest")
+        head_pitch = head_pitch + at * idle * np.radians(HANDS_HEAD_DEG)
     head_pitch = head_pitch + browsing * gaze_pitch
     rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(head_pitch)
     glob[:, J["head"]] = rot_head

@@ -91,7 +91,8 @@ def test_bending_at_the_hips_every_adult_reaches_a_counter_from_the_crowds_spots
 
 
 def test_a_low_table_takes_the_hands_of_short_bodies_only_and_no_lean_without_them() -> None:
-    """A 0.75 m table 0.4 m away: within reach bending ≤ 45° for a 1.55 m body; a 1.9 m body stands upright."""
+    """A 0.75 m table 0.4 m away: within reach bending ≤ 45° for a 1.55 m body; a 1.9 m body stands upright
+    and looks down at it."""
     n = 240
     surface = np.full((n, 2), np.nan)
     surface[60:180] = (0.4, 0.75)
@@ -103,6 +104,8 @@ def test_a_low_table_takes_the_hands_of_short_bodies_only_and_no_lean_without_th
         assert on == reaches
         tilt = np.degrees(np.arcsin(rots[:, J["pelvis"], 0, 2]))
         assert ((tilt[90:150] > 5.0).all()) == reaches
+        down = np.degrees(np.arcsin(-(rots[:, J["head"]] @ np.array([1.0, 0.0, 0.0]))[:, 2]))
+        assert (down[90:150] > down[:30].max() + 10.0).all()
 
 
 def test_counter_stays_become_surface_frames_only_at_surfaces() -> None:
