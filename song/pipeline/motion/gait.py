@@ -50,7 +50,6 @@ from song.pipeline.motion.postures import (
     PALM_M,
     REACH_FLEX_DEG,
     SHOULDER_FLEX_DEG,
-    Browse,
     arm_on_surface,
     arm_to,
     browse_plan,
@@ -334,19 +333,22 @@ class _Body:
         if traj.surface is None:
             return np.zeros(n), np.zeros(n)
         edge, height = traj.surface.T
+        at = np.flatnonzero(np.isfinite(edge))
         need = np.full(n, np.nan)
         spine = {J["pelvis"]: 0.0, **{J[name]: w for name, w in SPINE_PITCH_SHARE}}
-        for extra in np.radians(HANDS_LEAN_DEG)[::-1]:  # the least lean that reaches wins
-            r, point = self.rest, self.rest[0].copy()
-            for joint in _CHAIN["left"]:  # each offset turns with its parent's share of the chest's pitch
-                parent = PARENTS[joint]
-                share = spine.get(parent, 1.0)  # of the lean the hips do not take
-                pitch = share * lean + (HANDS_HIP_SHARE + (1.0 - HANDS_HIP_SHARE) * share) * extra
-                point = point + rot_y(np.array([pitch]))[0] @ (r[joint] - r[parent])
-            # with some slack: the pose's own sway and breathing must not take the surface out of reach
-            far = edge - self.hand_reach + HANDS_SLACK_M
-            reach = arm_on_surface(far, height, point[[0, 2]], self.upper_arm, self.forearm)[2]
-            need[reach] = extra
+        extras = np.radians(HANDS_LEAN_DEG)
+        shoulder = np.tile(self.rest[0, [0, 2]], (len(extras), 1))  # (x forward, z up) per lean
+        for joint in _CHAIN["left"]:  # each offset turns (about y) with its parent's share of the chest's pitch
+            parent = PARENTS[joint]
+            share = spine.get(parent, 1.0)  # of the lean the hips do not take
+            pitch = share * lean + (HANDS_HIP_SHARE + (1.0 - HANDS_HIP_SHARE) * share) * extras
+            dx, dz = (self.rest[joint] - self.rest[parent])[[0, 2]]
+            shoulder += np.stack([dx * np.cos(pitch) + dz * np.sin(pitch), dz * np.cos(pitch) - dx * np.sin(pitch)], -1)
+        # with some slack: the pose's own sway and breathing must not take the surface out of reach
+        far = edge[at] - self.hand_reach + HANDS_SLACK_M
+        for extra, point in zip(extras[::-1], shoulder[::-1], strict=True):  # the least lean that reaches wins
+            reach = arm_on_surface(far, height[at], point, self.upper_arm, self.forearm)[2]
+            need[at[reach]] = extra
         sigma = HANDS_RAMP_S / 4.0 * traj.fps
         hold = gaussian_filter1d(np.isfinite(need).astype(np.float64), sigma, mode="nearest") * idle
         return hold, gaussian_filter1d(np.nan_to_num(held_rows(need[:, None])[:, 0], nan=0.0), sigma, mode="nearest")
@@ -359,39 +361,41 @@ def _arm(rot_chest: np.ndarray, swing: np.ndarray, flex: np.ndarray, sign: float
 
 
 class _PlanarArm:
-    """One arm solved in the body's sagittal plane from where its shoulder is in a pose.
+    """One arm solved in the body's sagittal plane from where its shoulder is in a pose, over ``frames``.
 
     ``glob`` holds the pelvis, spine and collar rotations (the trunk's lean included); the arm swings
     in the chest's frame, which leans forward by ``chest_pitch`` (rad), so the planar solve's shoulder
     flexion (from the vertical) is that swing less the lean. Each solve is a planar two-bone solve
     (:func:`song.pipeline.motion.postures.arm_to`) corrected ``HANDS_ITERATIONS`` times by where the
-    arm, hanging slightly out to the side, really puts the wrist.
+    arm, hanging slightly out to the side, really puts the wrist. Every array it takes or returns
+    covers ``frames`` only (the frames where the arm does something: a few seconds of a minute).
     """
 
     def __init__(
-        self, traj: Trajectory, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray,
-        side: str, sign: float, chest_pitch: np.ndarray,
+        self, xy: np.ndarray, body: _Body, glob: np.ndarray, pelvis: np.ndarray, heading: np.ndarray,
+        side: str, sign: float, chest_pitch: np.ndarray, frames: slice,
     ) -> None:  # fmt: skip
         rest = body.rest
-        shoulder = pelvis.copy()
+        glob = glob[frames]
+        shoulder = pelvis[frames].copy()
         for joint in _CHAIN[side]:  # the shoulder's ancestors, pelvis first
             parent = PARENTS[joint]
             shoulder += np.einsum("tij,j->ti", glob[:, parent], rest[joint] - rest[parent])
-        self.traj, self.body, self.sign, self.chest_pitch = traj, body, sign, chest_pitch
+        self.xy, self.body, self.sign, self.chest_pitch = xy[frames], body, sign, chest_pitch[frames]
         self.shoulder, self.chest = shoulder, glob[:, J["spine3"]]
-        self.forward = np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+        self.forward = np.stack([np.cos(heading[frames]), np.sin(heading[frames])], axis=-1)
         self.upper = rest[J[f"{side}_elbow"]] - rest[J[f"{side}_shoulder"]]
         self.fore = rest[J[f"{side}_wrist"]] - rest[J[f"{side}_elbow"]]
-        self.local = np.stack([((shoulder[:, :2] - traj.xy) * self.forward).sum(-1), shoulder[:, 2]], axis=-1)
+        self.local = np.stack([((shoulder[:, :2] - self.xy) * self.forward).sum(-1), shoulder[:, 2]], axis=-1)
 
     def wrist_at(self, flex_s: np.ndarray, flex_e: np.ndarray) -> np.ndarray:
-        """``(T, 2)`` the wrist's [distance ahead of the plan, height] for planar shoulder and elbow flexions."""
+        """``(F, 2)`` the wrist's [distance ahead of the plan, height] for planar shoulder and elbow flexions."""
         rot_s, rot_e = _arm(self.chest, flex_s + self.chest_pitch, flex_e, self.sign)
         hand = self.shoulder + np.einsum("tij,j->ti", rot_s, self.upper) + np.einsum("tij,j->ti", rot_e, self.fore)
-        return np.stack([((hand[:, :2] - self.traj.xy) * self.forward).sum(-1), hand[:, 2]], axis=-1)
+        return np.stack([((hand[:, :2] - self.xy) * self.forward).sum(-1), hand[:, 2]], axis=-1)
 
     def solve(self, target: np.ndarray, flex_deg: tuple = SHOULDER_FLEX_DEG) -> tuple[np.ndarray, ...]:
-        """Shoulder flexion, elbow flexion (rad) and where possible, putting the wrist at ``target`` ``(T, 2)``."""
+        """Shoulder flexion, elbow flexion (rad) and where possible, putting the wrist at ``target`` ``(F, 2)``."""
         aim = target.copy()
         for _ in range(HANDS_ITERATIONS):
             flex_s, flex_e, possible = arm_to(*aim.T, self.local, self.body.upper_arm, self.body.forearm, flex_deg)
@@ -399,8 +403,17 @@ class _PlanarArm:
         return arm_to(*aim.T, self.local, self.body.upper_arm, self.body.forearm, flex_deg)
 
 
-def _hands_on(arm: _PlanarArm, hold: np.ndarray, base_flex: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Shoulder flexion, elbow flexion (rad) and palm turn (0-1) of one arm going onto ``traj.surface`` by ``hold``.
+def _active(weight: np.ndarray, pad: int) -> list[slice]:
+    """The runs of frames where ``weight`` > 0, each widened by ``pad`` frames on both sides (merged)."""
+    near = np.convolve(weight > 0.0, np.ones(2 * pad + 1), mode="same") > 0.0
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], near.astype(np.int8), [0]])))
+    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _hands_on(
+    arm: _PlanarArm, surface: np.ndarray, hold: np.ndarray, base_flex: float, fps: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shoulder flexion, elbow flexion (rad) and palm turn (0-1) of one arm going onto ``surface`` by ``hold``.
 
     The hand follows a path in the sagittal plane as ``hold`` goes 0 → 1: from where it hangs up to
     ``LIFT_CLEAR_M`` above the top, ``EDGE_CLEAR_M`` short of the edge, then forward onto the surface
@@ -408,11 +421,11 @@ def _hands_on(arm: _PlanarArm, hold: np.ndarray, base_flex: float) -> tuple[np.n
     :meth:`_PlanarArm.solve`. The palm turns from facing the thigh to lying flat as the hand moves over
     the surface. Where the surface is out of reach the arm hangs as it would.
     """
-    traj, body, chest_pitch = arm.traj, arm.body, arm.chest_pitch
-    end = held_rows(traj.surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
-    ramp = np.minimum(hold, gaussian_filter1d(arm.solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * traj.fps))
-    ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * traj.fps))  # the last turning step ends at once
-    hanging = arm.wrist_at(-chest_pitch, np.full(traj.n_frames, base_flex))
+    body, chest_pitch = arm.body, arm.chest_pitch
+    end = held_rows(surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
+    ramp = np.minimum(hold, gaussian_filter1d(arm.solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * fps))
+    ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * fps))  # the last turning step ends at once
+    hanging = arm.wrist_at(-chest_pitch, np.full(len(hold), base_flex))
     lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] + body.hand_reach - ONTO_SURFACE_M - EDGE_CLEAR_M),
                      end[:, 1] + LIFT_CLEAR_M], axis=-1)  # fmt: skip
     up, over = _smoothstep(np.clip(2.0 * ramp, 0.0, 1.0)), _smoothstep(np.clip(2.0 * ramp - 1.0, 0.0, 1.0))
@@ -424,17 +437,17 @@ def _hands_on(arm: _PlanarArm, hold: np.ndarray, base_flex: float) -> tuple[np.n
     return w * (flex_s + chest_pitch), (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
 
 
-def _touch_shelf(arm: _PlanarArm, browse: Browse, reach: np.ndarray, base_flex: float) -> tuple[np.ndarray, np.ndarray]:
-    """Shoulder and elbow flexion (rad) of one arm touching the item looked at on ``traj.shelf`` by ``reach``.
+def _touch_shelf(
+    arm: _PlanarArm, front: np.ndarray, height: np.ndarray, reach: np.ndarray, base_flex: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Shoulder and elbow flexion (rad) of one arm touching an item on a shelf by ``reach``.
 
-    The wrist's target lies a hand's length short of ``INTO_SHELF_M`` past the shelf's front, at the
-    height looked at; the arm's angles go there from the hanging arm's in proportion to ``reach``
-    (minimum-jerk in :func:`song.pipeline.motion.postures.browse_plan`), so the hand comes up and
-    forward without passing through the shelf. Out of reach (a shelf too far), the arm hangs.
+    The wrist's target lies a hand's length short of ``INTO_SHELF_M`` past the shelf's ``front`` (m
+    ahead), at ``height`` (the point looked at); the arm's angles go there from the hanging arm's in
+    proportion to ``reach`` (minimum-jerk in :func:`song.pipeline.motion.postures.browse_plan`), so the
+    hand comes up and forward without passing through the shelf. Out of reach, the arm hangs.
     """
-    traj, body = arm.traj, arm.body
-    front = held_rows(traj.shelf)[:, 0]
-    target = np.stack([front + INTO_SHELF_M - body.hand_reach, browse.look[:, 1]], axis=-1)
+    target = np.stack([front + INTO_SHELF_M - arm.body.hand_reach, height], axis=-1)
     flex_s, flex_e, possible = arm.solve(target, REACH_FLEX_DEG)
     w = np.where(possible, reach, 0.0)
     return w * (flex_s + arm.chest_pitch), (1.0 - w) * base_flex + w * flex_e
@@ -658,14 +671,14 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
     swing_left = walk * amplitude * np.cos(np.pi * (phase - 1.8))
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
         on_shoulder, flex, palm = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg)), np.zeros(n)
-        if on_surface.any():
-            arm = _PlanarArm(traj, body, glob, pelvis, heading, prefix, sign, chest_pitch)
-            on_shoulder, flex, palm = _hands_on(arm, on_surface, flex[0])
-        if browse is not None and browse.reach.any():
-            arm = _PlanarArm(traj, body, glob, pelvis, heading, prefix, sign, chest_pitch)
-            touch = browse.reach * idle * (browse.left == (prefix == "left"))
-            touching, bent = _touch_shelf(arm, browse, touch, flex[0])
-            on_shoulder, flex = np.where(touch > 0.0, touching, on_shoulder), np.where(touch > 0.0, bent, flex)
+        # the ramps and their smoothing reach 2 × HANDS_RAMP_S beyond where the hands hold: nothing moves outside
+        for f in _active(on_surface, int(2 * HANDS_RAMP_S * traj.fps)):
+            arm = _PlanarArm(traj.xy, body, glob, pelvis, heading, prefix, sign, chest_pitch, f)
+            on_shoulder[f], flex[f], palm[f] = _hands_on(arm, traj.surface[f], on_surface[f], flex[0], traj.fps)
+        touch = np.zeros(n) if browse is None else browse.reach * idle * (browse.left == (prefix == "left"))
+        for f in _active(touch, 0):
+            arm = _PlanarArm(traj.xy, body, glob, pelvis, heading, prefix, sign, chest_pitch, f)
+            on_shoulder[f], flex[f] = _touch_shelf(arm, traj.shelf[f, 0], browse.look[f, 1], touch[f], flex[0])
         flex = flex + 0.5 * np.maximum(swing, 0.0)
         shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
         # resting, the hand lies flat on the surface, fingers forward and a little inward (the T-pose's palms face down)
