@@ -686,6 +686,9 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         if palm.any():
             flat = rot_z(heading + sign * np.radians(90.0 + HANDS_INWARD_DEG))
             hand = quat_to_matrix(quat_slerp(matrix_to_quat(elbow), matrix_to_quat(flat), palm))
+        if touch.any():  # touching an item on a shelf, the fingers point forward, the palm faces in
+            grip = rot_z(heading + sign * np.radians(90.0)) @ rot_y(np.full(n, -np.pi / 2))
+            hand = quat_to_matrix(quat_slerp(matrix_to_quat(hand), matrix_to_quat(grip), touch))
         glob[:, J[f"{prefix}_shoulder"]] = shoulder
         glob[:, J[f"{prefix}_elbow"]] = elbow
         glob[:, J[f"{prefix}_wrist"]] = hand

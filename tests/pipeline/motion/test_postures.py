@@ -186,6 +186,9 @@ def test_browsing_turns_the_head_along_the_shelf_and_a_hand_touches_an_item() ->
     touch = hands[full, side[full]]
     np.testing.assert_allclose(touch[:, 0], 0.45 + INTO_SHELF_M, atol=0.04)
     np.testing.assert_allclose(touch[:, 2], plan.look[full, 1], atol=0.06)
+    grip = rots[full, np.where(plan.left[full], J["left_hand"], J["right_hand"])]
+    medial = np.where(plan.left[full], -1.0, 1.0)  # the palm (T-pose -z) faces the body's midline
+    assert ((grip @ np.array([0.0, 0.0, -1.0]))[:, 1] * medial > 0.9).all()
     assert (hands[..., 0] <= 0.45 + INTO_SHELF_M + 0.02).all()
     assert (hands[:50, :, 2] < 1.0).all() and (hands[-50:, :, 2] < 1.0).all()
     still = plan.reach == 0.0  # between touches both arms hang
