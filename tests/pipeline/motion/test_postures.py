@@ -108,42 +108,30 @@ def test_a_low_table_takes_the_hands_of_short_bodies_only_and_no_lean_without_th
         assert (down[90:150] > down[:30].max() + 10.0).all()
 
 
-def test_counter_stays_become_surface_frames_only_at_surfaces() -> None:
+@pytest.mark.parametrize(
+    ("track", "accept", "kind", "others", "stop_x"),
+    [
+        (surface_track, is_surface, ("counter", "furniture", 1.0), [("shelf", "furniture", 1.8), ("desk", "furniture", 0.5)], 0.7),
+        (shelf_track, is_shelf, ("shelf", "storage", 1.9), [("shelving unit", "storage", 0.7), ("counter", "furniture", 1.0)], 0.55),
+    ],
+)  # fmt: skip
+def test_stays_become_posture_frames_only_at_their_objects(track, accept, kind, others, stop_x: float) -> None:
+    """Walking at 0.5 m/s to a spot short of a 1 m square object (its front at x = 1), then standing there."""
     square = [(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)]
     objects = {
-        "counter_1": SceneObject(id="counter_1", label="counter", category="furniture", footprint=square, z_max=1.0),
-        "shelf_1": SceneObject(id="shelf_1", label="shelf", category="furniture", footprint=square, z_max=1.8),
-        "desk_low": SceneObject(id="desk_low", label="desk", category="furniture", footprint=square, z_max=0.5),
+        f"o{k}": SceneObject(id=f"o{k}", label=label, category=category, footprint=square, z_max=top)
+        for k, (label, category, top) in enumerate([kind, *others])
     }
-    assert [is_surface(o) for o in objects.values()] == [True, False, False]
-    n = 300
+    assert [accept(o) for o in objects.values()] == [True, False, False]
+    n, arrive = 300, int(round(stop_x / 0.5 * FPS))
     xy = np.zeros((n, 2))
-    xy[:, 0] = np.clip(np.arange(n) / FPS * 0.5, 0.0, 0.7)  # walks to 0.7 m, 0.3 m short of the counter, stays
-    speed = np.r_[np.full(42, 0.5), np.zeros(n - 42)]
-    track = surface_track(xy, speed, FPS, [("counter_1", (0.7, 0.0), 0.3)], objects)
-    held = np.isfinite(track[:, 0])
-    assert held[100:250].all() and not held[:42].any() and not held[-10:].any()  # settled first, off before the end
-    np.testing.assert_allclose(track[held], [[0.3, 1.0]] * int(held.sum()))
-    assert surface_track(xy, speed, FPS, [("shelf_1", (0.7, 0.0), 0.3), ("desk_low", (0.7, 0.0), 0.3)], objects) is None
-
-
-def test_shelf_stays_become_browsing_frames_only_at_tall_shelves() -> None:
-    square = [(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)]
-    objects = {
-        "shelf_1": SceneObject(id="shelf_1", label="shelf", category="storage", footprint=square, z_max=1.9),
-        "low": SceneObject(id="low", label="shelving unit", category="storage", footprint=square, z_max=0.7),
-        "counter_1": SceneObject(id="counter_1", label="counter", category="furniture", footprint=square, z_max=1.0),
-    }
-    assert [is_shelf(o) for o in objects.values()] == [True, False, False]
-    n = 300
-    xy = np.zeros((n, 2))
-    xy[:, 0] = np.clip(np.arange(n) / FPS * 0.5, 0.0, 0.55)
-    speed = np.r_[np.full(33, 0.5), np.zeros(n - 33)]
-    track = shelf_track(xy, speed, FPS, [("shelf_1", (0.55, 0.0), 0.3)], objects)
-    held = np.isfinite(track[:, 0])
-    assert held[100:250].all() and not held[:33].any() and not held[-10:].any()
-    np.testing.assert_allclose(track[held], [[0.45, 1.9]] * int(held.sum()))
-    assert shelf_track(xy, speed, FPS, [("low", (0.55, 0.0), 0.3), ("counter_1", (0.55, 0.0), 0.3)], objects) is None
+    xy[:, 0] = np.clip(np.arange(n) / FPS * 0.5, 0.0, stop_x)
+    speed = np.r_[np.full(arrive, 0.5), np.zeros(n - arrive)]
+    stays = track(xy, speed, FPS, [("o0", (stop_x, 0.0), 0.3)], objects)
+    held = np.isfinite(stays[:, 0])
+    assert held[100:250].all() and not held[:arrive].any() and not held[-10:].any()  # settled first, off before the end
+    np.testing.assert_allclose(stays[held], [[1.0 - stop_x, kind[2]]] * int(held.sum()))
+    assert track(xy, speed, FPS, [("o1", (stop_x, 0.0), 0.3), ("o2", (stop_x, 0.0), 0.3)], objects) is None
 
 
 def _browsing(n: int = 600) -> Trajectory:
