@@ -1,4 +1,4 @@
-"""Postures at the objects pedestrians stand at: hands resting on a counter, desk or table.
+"""Postures at the objects pedestrians stand at: hands resting on a counter, desk or table; browsing a shelf.
 
 The crowd turns a pedestrian standing at an object to face it (docs/crowd.md); here the motion stage
 finds the frames where it stands at a surface it can rest its hands on -- an object whose label or
@@ -12,6 +12,10 @@ Where people at a service counter or a standing desk put their hands is not tabu
 literature; the posture (hands a forearm's length ahead, arms slightly bent, the trunk leaning a few
 degrees) is the neutral "standing work at a bench" posture of ergonomics texts, with the surface at
 0.7-1.2 m (standing work heights; Grandjean, *Fitting the Task to the Man*, 1988).
+
+At a shelf taller than that (:func:`is_shelf`) the pedestrian browses instead
+(:attr:`song.pipeline.motion.types.Trajectory.shelf`, :func:`browse_plan`): it looks along the shelf
+point after point and now and then touches an item at arm's height.
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ REACH_FLEX_DEG = (-30.0, 110.0)  # reaching for an item, up to 110° forward (sh
 # a fraction of a second to a few seconds with head movements between them; the figures below are our
 # choice for a calm browse, not measured values.
 SHELF_KEYWORDS = ("shelf", "shelving", "bookcase", "book", "rack", "display")
-SHELF_MIN_TOP_M = 1.2  # a shelf one browses standing reaches above this
+SHELF_MIN_TOP_M = SURFACE_HEIGHT_M[1]  # a shelf one browses standing reaches above this (no surface does)
 LOOK_S = (1.5, 3.0)  # each look lasts this long (uniform)
 GAZE_MOVE_S = 0.4  # the gaze moves from one point to the next over this long
 LOOK_SPAN_M = 0.6  # points looked at lie this far left or right of straight ahead along the shelf
@@ -63,7 +67,7 @@ def is_surface(obj) -> bool:
 def is_shelf(obj) -> bool:
     """The object is a shelf, bookcase, rack or display one browses standing (top above ``SHELF_MIN_TOP_M``)."""
     text = f"{obj.label} {obj.category}".lower()
-    return any(k in text for k in SHELF_KEYWORDS) and obj.z_max >= SHELF_MIN_TOP_M
+    return any(k in text for k in SHELF_KEYWORDS) and obj.z_max > SHELF_MIN_TOP_M
 
 
 def stay_track(xy: np.ndarray, speed: np.ndarray, fps: float, stops: list, objects: dict, accept) -> np.ndarray | None:
