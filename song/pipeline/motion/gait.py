@@ -115,6 +115,8 @@ _CHAIN = {  # the joints from the pelvis to each shoulder, in order
     for side in ("left", "right")
 }
 ARM_HANG_DEG = 82.0  # the arms hang this far down from the T-pose (8° out from the body)
+TOUCH_BLEND_S = 0.3  # touching a shelf item, the solved arm takes over from the hanging one within no less than this
+ARM_STRAIGHT = 0.975  # a solved arm reaches at most this share of its length (arm_to declines past 0.98)
 HANDS_ITERATIONS = 2  # corrections of the hands' planar solve by where the arm really puts them
 HANDS_INWARD_DEG = 15.0  # resting on a surface, the fingers point this far inward of straight ahead
 HANDS_RAMP_S = 1.0  # the arms move onto a counter, desk or table, and off it, over about this long
@@ -316,9 +318,8 @@ class _Body:
         self.upper_arm = float(np.linalg.norm(r[J["left_elbow"]] - r[J["left_shoulder"]]))
         self.forearm = float(np.linalg.norm(r[J["left_wrist"]] - r[J["left_elbow"]]))
         # a hand lying flat, fingers turned in by HANDS_INWARD_DEG: its mid-palm joint this far ahead of the wrist
-        self.hand_reach = float(
-            np.linalg.norm(r[J["left_hand"]] - r[J["left_wrist"]]) * np.cos(np.radians(HANDS_INWARD_DEG))
-        )
+        self.hand_length = float(np.linalg.norm(r[J["left_hand"]] - r[J["left_wrist"]]))  # wrist to mid-palm
+        self.hand_reach = self.hand_length * float(np.cos(np.radians(HANDS_INWARD_DEG)))
 
     def hands_on_surface(self, traj: Trajectory, idle: np.ndarray, lean: float) -> tuple[np.ndarray, np.ndarray]:
         """How much (0-1) the body rests its hands on a counter, desk or table, and how far it leans (rad).
@@ -347,7 +348,7 @@ class _Body:
         # with some slack: the pose's own sway and breathing must not take the surface out of reach
         far = edge[at] - self.hand_reach + HANDS_SLACK_M
         for extra, point in zip(extras[::-1], shoulder[::-1], strict=True):  # the least lean that reaches wins
-            reach = arm_on_surface(far, height[at], point, self.upper_arm, self.forearm)[2]
+            reach = arm_on_surface(far, height[at], point, self.upper_arm, self.forearm, lean + extra)[2]
             need[at[reach]] = extra
         sigma = HANDS_RAMP_S / 4.0 * traj.fps
         hold = gaussian_filter1d(np.isfinite(need).astype(np.float64), sigma, mode="nearest") * idle
@@ -387,6 +388,7 @@ class _PlanarArm:
         self.upper = rest[J[f"{side}_elbow"]] - rest[J[f"{side}_shoulder"]]
         self.fore = rest[J[f"{side}_wrist"]] - rest[J[f"{side}_elbow"]]
         self.local = np.stack([((shoulder[:, :2] - self.xy) * self.forward).sum(-1), shoulder[:, 2]], axis=-1)
+        self.bones = (self.local, body.upper_arm, body.forearm)  # arm_to's shoulder and lengths
 
     def wrist_at(self, flex_s: np.ndarray, flex_e: np.ndarray) -> np.ndarray:
         """``(F, 2)`` the wrist's [distance ahead of the plan, height] for planar shoulder and elbow flexions."""
@@ -395,12 +397,21 @@ class _PlanarArm:
         return np.stack([((hand[:, :2] - self.xy) * self.forward).sum(-1), hand[:, 2]], axis=-1)
 
     def solve(self, target: np.ndarray, flex_deg: tuple = SHOULDER_FLEX_DEG) -> tuple[np.ndarray, ...]:
-        """Shoulder flexion, elbow flexion (rad) and where possible, putting the wrist at ``target`` ``(F, 2)``."""
+        """Shoulder flexion, elbow flexion (rad) and where possible, putting the wrist at ``target`` ``(F, 2)``.
+
+        A target a little out of reach (by at most ``HANDS_SLACK_M``: the pose's sway and breathing) is
+        pulled in to where the arm reaches, so the hand stays there instead of dropping for a frame.
+        """
+        reach = ARM_STRAIGHT * (self.body.upper_arm + self.body.forearm)
+        offset = target - self.local
+        distance = np.linalg.norm(offset, axis=1, keepdims=True)
+        near = distance <= reach / ARM_STRAIGHT + HANDS_SLACK_M
+        target = np.where(near & (distance > reach), self.local + offset * (reach / np.maximum(distance, 1e-9)), target)
         aim = target.copy()
         for _ in range(HANDS_ITERATIONS):
-            flex_s, flex_e, possible = arm_to(*aim.T, self.local, self.body.upper_arm, self.body.forearm, flex_deg)
+            flex_s, flex_e, possible = arm_to(*aim.T, *self.bones, flex_deg, self.chest_pitch)
             aim = aim - np.where(possible[:, None], self.wrist_at(flex_s, flex_e) - target, 0.0)
-        return arm_to(*aim.T, self.local, self.body.upper_arm, self.body.forearm, flex_deg)
+        return arm_to(*aim.T, *self.bones, flex_deg, self.chest_pitch)
 
 
 def _active(weight: np.ndarray, pad: int) -> list[slice]:
@@ -410,46 +421,68 @@ def _active(weight: np.ndarray, pad: int) -> list[slice]:
     return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
+def _blend_in(
+    flex_s: np.ndarray, flex_e: np.ndarray, possible: np.ndarray, weight: np.ndarray, steps: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How much (0-1) a solved arm takes over from the hanging one, and its angles.
+
+    The weight follows ``weight`` where the solve is possible and 0 elsewhere, changing over at least
+    ``steps`` frames from 0 to 1, in time order: it rises only once a pose is possible, and where a
+    target goes out of reach the arm keeps its last reachable pose while the weight falls.
+    """
+    step = 1.0 / max(steps, 1.0)
+    wanted = np.where(possible, weight, 0.0).tolist()
+    w, level = np.empty(len(wanted)), 0.0
+    for i, value in enumerate(wanted):  # a few hundred frames per stay
+        level = min(max(value, level - step), level + step)
+        w[i] = level
+    angles = np.nan_to_num(held_rows(np.where(possible[:, None], np.stack([flex_s, flex_e], -1), np.nan)))
+    return w, angles[:, 0], angles[:, 1]
+
+
 def _hands_on(
     arm: _PlanarArm, surface: np.ndarray, hold: np.ndarray, base_flex: float, fps: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shoulder flexion, elbow flexion (rad) and palm turn (0-1) of one arm going onto ``surface`` by ``hold``.
 
-    The hand follows a path in the sagittal plane as ``hold`` goes 0 → 1: from where it hangs up to
-    ``LIFT_CLEAR_M`` above the top, ``EDGE_CLEAR_M`` short of the edge, then forward onto the surface
-    (leaving, back the same way), so it never passes through the edge; every frame is a
-    :meth:`_PlanarArm.solve`. The palm turns from facing the thigh to lying flat as the hand moves over
-    the surface. Where the surface is out of reach the arm hangs as it would.
+    The hand follows a path in the sagittal plane as ``hold`` goes 0 → 1: from where it hangs, up and
+    forward until it clears the top by ``LIFT_CLEAR_M`` even pointing down, the whole hand
+    ``EDGE_CLEAR_M`` short of the edge, then forward onto the surface (leaving, back the same way), so
+    it never passes through the edge; every frame is a :meth:`_PlanarArm.solve`, blended in by
+    :func:`_blend_in`. The palm turns from facing the thigh to lying flat as the hand moves over the
+    surface. Where the surface is out of reach the arm hangs as it would.
     """
     body, chest_pitch = arm.body, arm.chest_pitch
     end = held_rows(surface) + np.array([ONTO_SURFACE_M - body.hand_reach, PALM_M])  # the wrist of a flat hand
     ramp = np.minimum(hold, gaussian_filter1d(arm.solve(end)[2].astype(np.float64), HANDS_RAMP_S / 4.0 * fps))
     ramp = rate_limited(ramp, 1.0 / (HANDS_RAMP_S * fps))  # the last turning step ends at once
     hanging = arm.wrist_at(-chest_pitch, np.full(len(hold), base_flex))
-    lift = np.stack([np.minimum(hanging[:, 0], end[:, 0] + body.hand_reach - ONTO_SURFACE_M - EDGE_CLEAR_M),
-                     end[:, 1] + LIFT_CLEAR_M], axis=-1)  # fmt: skip
+    lift = np.stack([np.maximum(hanging[:, 0], end[:, 0] - ONTO_SURFACE_M - EDGE_CLEAR_M),
+                     end[:, 1] - PALM_M + body.hand_length + LIFT_CLEAR_M], axis=-1)  # fmt: skip
     up, over = _smoothstep(np.clip(2.0 * ramp, 0.0, 1.0)), _smoothstep(np.clip(2.0 * ramp - 1.0, 0.0, 1.0))
     path = np.where(
         (ramp < 0.5)[:, None], hanging + up[:, None] * (lift - hanging), lift + over[:, None] * (end - lift)
     )
     flex_s, flex_e, possible = arm.solve(path)
-    w = np.where(possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 0.0)  # from the hanging arm's own angles
+    # the arm leaves its hanging angles near the start of the path, where the solved pose is close to them
+    w, flex_s, flex_e = _blend_in(flex_s, flex_e, possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 1.0)
     return w * (flex_s + chest_pitch), (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
 
 
 def _touch_shelf(
-    arm: _PlanarArm, front: np.ndarray, height: np.ndarray, reach: np.ndarray, base_flex: float
+    arm: _PlanarArm, front: np.ndarray, height: np.ndarray, reach: np.ndarray, base_flex: float, fps: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Shoulder and elbow flexion (rad) of one arm touching an item on a shelf by ``reach``.
 
     The wrist's target lies a hand's length short of ``INTO_SHELF_M`` past the shelf's ``front`` (m
     ahead), at ``height`` (the point looked at); the arm's angles go there from the hanging arm's in
-    proportion to ``reach`` (minimum-jerk in :func:`song.pipeline.motion.postures.browse_plan`), so the
-    hand comes up and forward without passing through the shelf. Out of reach, the arm hangs.
+    proportion to ``reach`` (minimum-jerk in :func:`song.pipeline.motion.postures.browse_plan`; blended
+    by :func:`_blend_in`), so the hand comes up and forward without passing through the shelf. Out of
+    reach, the arm hangs.
     """
     target = np.stack([front + INTO_SHELF_M - arm.body.hand_reach, height], axis=-1)
     flex_s, flex_e, possible = arm.solve(target, REACH_FLEX_DEG)
-    w = np.where(possible, reach, 0.0)
+    w, flex_s, flex_e = _blend_in(flex_s, flex_e, possible, reach, TOUCH_BLEND_S * fps)
     return w * (flex_s + arm.chest_pitch), (1.0 - w) * base_flex + w * flex_e
 
 
@@ -678,7 +711,9 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         touch = np.zeros(n) if browse is None else browse.reach * idle * (browse.left == (prefix == "left"))
         for f in _active(touch, 0):
             arm = _PlanarArm(traj.xy, body, glob, pelvis, heading, prefix, sign, chest_pitch, f)
-            on_shoulder[f], flex[f] = _touch_shelf(arm, traj.shelf[f, 0], browse.look[f, 1], touch[f], flex[0])
+            on_shoulder[f], flex[f] = _touch_shelf(
+                arm, traj.shelf[f, 0], browse.look[f, 1], touch[f], flex[0], traj.fps
+            )
         flex = flex + 0.5 * np.maximum(swing, 0.0)
         shoulder, elbow = _arm(rot_chest, swing + on_shoulder, flex, sign)
         # resting, the hand lies flat on the surface, fingers forward and a little inward (the T-pose's palms face down)

@@ -37,8 +37,8 @@ LEAVE_S = 0.5  # and are off the surface this long before the pedestrian walks o
 MIN_REST_S = 2.0  # a shorter rest is left alone: the hands take about a second to go on and one to come off
 ONTO_SURFACE_M = 0.05  # the hands rest this far beyond the edge
 PALM_M = 0.025  # the hand joint (mid-palm) lies this far above the surface
-LIFT_CLEAR_M, EDGE_CLEAR_M = 0.06, 0.05  # on the way, the hand comes up this far above the top, short of the edge
-SHOULDER_FLEX_DEG = (-30.0, 60.0)  # the upper arm from 30° behind the body to 60° raised forward
+LIFT_CLEAR_M, EDGE_CLEAR_M = 0.03, 0.05  # on the way, the hand (even pointing down) clears the top, short of the edge
+SHOULDER_FLEX_DEG = (-30.0, 90.0)  # the upper arm from 30° behind the trunk to 90° raised forward of it
 REACH_FLEX_DEG = (-30.0, 110.0)  # reaching for an item, up to 110° forward (shoulder flexion reaches ~170°)
 # Browsing a shelf (a stay at an object ``is_shelf`` takes): the pedestrian looks along it, point after
 # point, and now and then touches an item at arm's height. Visual search of a shelf goes by fixations of
@@ -53,7 +53,7 @@ LOOK_HEIGHT_M = (0.5, 1.8)  # and between these heights (capped at the shelf's t
 REACH_SHARE = 0.8  # of the looks at a point the hand can touch, this share ends in a touch
 REACH_HEIGHT_M = (0.9, 1.6)  # a hand touches items between these heights
 REACH_SIDE_M = 0.35  # and no farther left or right than this (the hand on that side goes)
-REACH_S = (0.5, 0.6, 0.5)  # out, resting on the item, back
+REACH_S = (0.8, 0.6, 0.8)  # out, resting on the item, back (peak hand speed ~2 m/s)
 INTO_SHELF_M = 0.03  # the touching mid-palm lies this far past the shelf's front
 BROWSE_RAMP_S = 0.5  # browsing fades in and out over about this long
 
@@ -141,8 +141,8 @@ def browse_plan(shelf: np.ndarray, fps: float, seed: int) -> Browse:
     Each stay is split into looks of ``LOOK_S`` seconds at points drawn along the shelf (``LOOK_SPAN_M``
     either side of straight ahead, at ``LOOK_HEIGHT_M`` capped at the top); the gaze moves from one
     to the next with a minimum-jerk profile over ``GAZE_MOVE_S``. A look at a point the hand can touch
-    (``REACH_HEIGHT_M``, ``REACH_SIDE_M``) that lasts long enough ends in a touch with ``REACH_SHARE``
-    probability: once the gaze is there, the hand on that side goes out, rests and comes back over
+    (``REACH_HEIGHT_M``, ``REACH_SIDE_M``) ends in a touch with ``REACH_SHARE`` probability (the look
+    lasting as long as the touch needs, within the stay): once the gaze is there, the hand on that side goes out, rests and comes back over
     ``REACH_S``. Deterministic in ``seed``.
     """
     n = len(shelf)
@@ -159,13 +159,17 @@ def browse_plan(shelf: np.ndarray, fps: float, seed: int) -> Browse:
         while f < hi:
             point = np.array([rng.uniform(-LOOK_SPAN_M, LOOK_SPAN_M),
                               rng.uniform(LOOK_HEIGHT_M[0], min(LOOK_HEIGHT_M[1], shelf[lo, 1]))])  # fmt: skip
-            end = min(f + int(round(rng.uniform(*LOOK_S) * fps)), hi)
+            length = int(round(rng.uniform(*LOOK_S) * fps))
+            reachable = REACH_HEIGHT_M[0] <= point[1] <= REACH_HEIGHT_M[1] and abs(point[0]) <= REACH_SIDE_M
+            touching = rng.random() < REACH_SHARE and reachable
+            if touching:  # the look lasts as long as the touch needs
+                length = max(length, move + len(touch))
+            end = min(f + length, hi)
             look[f:end] = point
             if previous is not None:  # the gaze travels from the last point
                 w = min_jerk(np.arange(1, move + 1) / move)[: end - f, None]
                 look[f : f + len(w)] = previous + w * (point - previous)
-            reachable = REACH_HEIGHT_M[0] <= point[1] <= REACH_HEIGHT_M[1] and abs(point[0]) <= REACH_SIDE_M
-            if rng.random() < REACH_SHARE and reachable and f + move + len(touch) <= end:
+            if touching and f + move + len(touch) <= end:
                 reach[f + move : f + move + len(touch)] = touch
                 left[f + move : f + move + len(touch)] = point[0] >= 0.0
             f, previous = end, point
@@ -175,7 +179,7 @@ def browse_plan(shelf: np.ndarray, fps: float, seed: int) -> Browse:
 
 def arm_to(
     forward_m: np.ndarray, height_m: np.ndarray, shoulder: np.ndarray, upper: float, fore: float,
-    flex_deg: tuple = SHOULDER_FLEX_DEG,
+    flex_deg: tuple = SHOULDER_FLEX_DEG, trunk_pitch: float | np.ndarray = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Shoulder flexion and elbow flexion (rad) putting the hand at a point, and where it is possible.
 
@@ -190,7 +194,9 @@ def arm_to(
         shoulder: ``(2,)`` or ``(T, 2)``: the shoulder's forward offset and height in the body, m.
         upper: upper-arm length (shoulder to elbow), m.
         fore: forearm length (elbow to the hand joint), m.
-        flex_deg: the shoulder's flexion range, degrees.
+        flex_deg: the shoulder's flexion range relative to the trunk, degrees.
+        trunk_pitch: how far the trunk leans forward, rad (scalar or ``(T,)``): an arm hanging straight
+            down is flexed this much relative to the trunk.
 
     Returns:
         ``(shoulder flexion (T,), elbow flexion (T,), possible (T,) bool)``.
@@ -202,14 +208,15 @@ def arm_to(
     cos_inner = (upper**2 + fore**2 - reach**2) / (2 * upper * fore)
     elbow = np.pi - np.arccos(np.clip(cos_inner, -1.0, 1.0))
     shoulder_flex = np.arctan2(forward, drop) - np.arctan2(fore * np.sin(elbow), upper + fore * np.cos(elbow))
-    lo, hi = np.radians(flex_deg)
+    lo, hi = np.radians(flex_deg[0]) - trunk_pitch, np.radians(flex_deg[1]) - trunk_pitch  # from the vertical
     possible = np.isfinite(forward_m) & (reach < 0.98 * (upper + fore)) & (shoulder_flex >= lo) & (shoulder_flex <= hi)
     return np.where(possible, shoulder_flex, 0.0), np.where(possible, elbow, 0.0), possible
 
 
 def arm_on_surface(
-    edge_m: np.ndarray, height_m: np.ndarray, shoulder: np.ndarray, upper: float, fore: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    edge_m: np.ndarray, height_m: np.ndarray, shoulder: np.ndarray, upper: float, fore: float,
+    trunk_pitch: float | np.ndarray = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """:func:`arm_to` the resting hand: ``ONTO_SURFACE_M`` beyond the edge, ``PALM_M`` above the top.
 
     Args:
@@ -218,5 +225,6 @@ def arm_on_surface(
         shoulder: as for :func:`arm_to`.
         upper: as for :func:`arm_to`.
         fore: as for :func:`arm_to`.
+        trunk_pitch: as for :func:`arm_to`.
     """
-    return arm_to(edge_m + ONTO_SURFACE_M, height_m + PALM_M, shoulder, upper, fore)
+    return arm_to(edge_m + ONTO_SURFACE_M, height_m + PALM_M, shoulder, upper, fore, trunk_pitch=trunk_pitch)

@@ -186,7 +186,7 @@ def test_browsing_turns_the_head_along_the_shelf_and_a_hand_touches_an_item() ->
 def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
     """On the sample scenes' crowds, every stay at a counter of 0.9 m or more within 0.5 m (every adult
     height reaches it bending at the hips) has both hands on it at its middle, and most stays at surfaces
-    of standing-work height (top ≥ 0.8 m) do."""
+    of standing-work height (top ≥ 0.8 m) do; no hand jumps between frames."""
     from song.datasets.run import SceneFolder, read_intents
     from song.datasets.scenes import load_scene_package
     from song.pipeline.motion.stage import read_trajectories, with_stays
@@ -203,6 +203,8 @@ def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
             held = np.flatnonzero(np.isfinite(traj.surface[:, 0]))
             assert (traj.speed[held] < 0.01).all()  # only while standing
             joints = generate_gait(traj, style_for(traj.ped_id, MotionConfig())).joints
+            hands = joints[:, [J["left_hand"], J["right_hand"]]]
+            assert np.linalg.norm(np.diff(hands, axis=0), axis=-1).max() < 0.12  # no frame jumps (< 3.6 m/s)
             for stay in np.split(held, np.flatnonzero(np.diff(held) > 1) + 1):
                 middle = stay[len(stay) // 2]
                 edge, top = traj.surface[middle]
@@ -216,7 +218,8 @@ def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
 
 
 def test_sample_crowds_browse_shelves(sample_run) -> None:
-    """On the sample scenes' crowds, pedestrians stay at shelves long enough to browse, and some touch items."""
+    """On the sample scenes' crowds, pedestrians stay at shelves long enough to browse, some touch items, and
+    no hand jumps between frames."""
     from song.datasets.run import SceneFolder, read_intents
     from song.datasets.scenes import load_scene_package
     from song.pipeline.motion.stage import read_trajectories, with_stays
@@ -235,4 +238,7 @@ def test_sample_crowds_browse_shelves(sample_run) -> None:
                 assert not (held & np.isfinite(traj.surface[:, 0])).any()
             browsing += 1
             touches += int((browse_plan(traj.shelf, traj.fps, traj.ped_id).reach >= 0.999).any())
+            joints = generate_gait(traj, style_for(traj.ped_id, MotionConfig())).joints
+            hands = joints[:, [J["left_hand"], J["right_hand"]]]
+            assert np.linalg.norm(np.diff(hands, axis=0), axis=-1).max() < 0.12  # no frame jumps (< 3.6 m/s)
     assert browsing >= 5 and touches >= 2
