@@ -31,21 +31,17 @@ from song.pipeline.chain import iter_run  # noqa: E402
 from song.pipeline.motion.gait import _Body, _plan_signals, generate_gait, style_for  # noqa: E402
 from song.pipeline.motion.postures import PALM_M, browse_plan  # noqa: E402
 from song.pipeline.motion.stage import read_trajectories, with_stays  # noqa: E402
+from song.pipeline.motion.types import true_runs  # noqa: E402
 
 SCENES = ROOT / "datasets" / "sample_scenes"
 TOPS_M = {"0.70-0.80": (0.7, 0.8), "0.80-0.95": (0.8, 0.95), "0.95-1.20": (0.95, 1.2001)}
 HANDS = [J["left_hand"], J["right_hand"]]
 
 
-def _runs(frames: np.ndarray) -> list[np.ndarray]:
-    return np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1) if len(frames) else []
-
-
 def _surface_figures(traj, joints: np.ndarray, style, tally: dict) -> None:
-    held = np.flatnonzero(np.isfinite(traj.surface[:, 0]))
     rested = False
-    for stay in _runs(held):
-        middle = stay[len(stay) // 2]
+    for lo, hi in true_runs(np.isfinite(traj.surface[:, 0])):
+        middle = (lo + hi) // 2
         top = traj.surface[middle, 1]
         on = bool(np.abs(joints[middle, HANDS, 2] - top - PALM_M).max() < 0.01)
         rested |= on
@@ -94,11 +90,11 @@ def main() -> None:
                 if traj.surface is not None:
                     _surface_figures(traj, joints, style, surfaces)
                 if traj.shelf is not None:
-                    held = np.flatnonzero(np.isfinite(traj.shelf[:, 0]))
+                    held = np.isfinite(traj.shelf[:, 0])
                     reach = browse_plan(traj.shelf, traj.fps, traj.ped_id).reach >= 0.999
                     shelves["pedestrians"] += 1
-                    shelves["stays"] += len(_runs(held))
-                    shelves["seconds"] += len(held) / traj.fps
+                    shelves["stays"] += len(true_runs(held))
+                    shelves["seconds"] += held.sum() / traj.fps
                     shelves["touches"] += int(np.sum(np.diff(reach.astype(np.int8)) == 1))
     shelves["seconds"] = round(shelves["seconds"], 1)
     emit({"scenes": len(results), "seed": args.seed, "pedestrians": pedestrians, "surfaces": surfaces,

@@ -54,7 +54,16 @@ from song.pipeline.motion.postures import (
     arm_to,
     browse_plan,
 )
-from song.pipeline.motion.types import Motion, Trajectory, body_heading, held_rows, min_jerk, path_yaw, rate_limited
+from song.pipeline.motion.types import (
+    Motion,
+    Trajectory,
+    body_heading,
+    held_rows,
+    min_jerk,
+    path_yaw,
+    rate_limited,
+    true_runs,
+)
 
 # Walk ratio (step length / step frequency) is constant per person across speeds, 0.34-0.42 m·s in adults
 # around 0.38, and grows with body height (Sekiya & Nagasaki 1998, Gait Posture 7:225): the configured walk
@@ -417,8 +426,7 @@ class _PlanarArm:
 def _active(weight: np.ndarray, pad: int) -> list[slice]:
     """The runs of frames where ``weight`` > 0, each widened by ``pad`` frames on both sides (merged)."""
     near = np.convolve(weight > 0.0, np.ones(2 * pad + 1), mode="same") > 0.0
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], near.astype(np.int8), [0]])))
-    return [slice(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return [slice(a, b) for a, b in true_runs(near)]
 
 
 def _blend_in(
@@ -427,15 +435,15 @@ def _blend_in(
     """How much (0-1) a solved arm takes over from the hanging one, and its angles.
 
     The weight follows ``weight`` where the solve is possible and 0 elsewhere, changing over at least
-    ``steps`` frames from 0 to 1, in time order: it rises only once a pose is possible, and where a
-    target goes out of reach the arm keeps its last reachable pose while the weight falls.
+    ``steps`` frames from 0 to 1 (0: at once), in time order: it rises only once a pose is possible,
+    and where a target goes out of reach the arm keeps its last reachable pose while the weight falls.
     """
-    step = 1.0 / max(steps, 1.0)
-    wanted = np.where(possible, weight, 0.0).tolist()
-    w, level = np.empty(len(wanted)), 0.0
-    for i, value in enumerate(wanted):  # a few hundred frames per stay
-        level = min(max(value, level - step), level + step)
-        w[i] = level
+    w = np.where(possible, weight, 0.0)
+    if steps > 1.0:
+        level = 0.0
+        for i, value in enumerate(w.tolist()):  # a touch: a couple of seconds of frames
+            level = min(max(value, level - 1.0 / steps), level + 1.0 / steps)
+            w[i] = level
     angles = np.nan_to_num(held_rows(np.where(possible[:, None], np.stack([flex_s, flex_e], -1), np.nan)))
     return w, angles[:, 0], angles[:, 1]
 
@@ -465,7 +473,7 @@ def _hands_on(
     )
     flex_s, flex_e, possible = arm.solve(path)
     # the arm leaves its hanging angles near the start of the path, where the solved pose is close to them
-    w, flex_s, flex_e = _blend_in(flex_s, flex_e, possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 1.0)
+    w, flex_s, flex_e = _blend_in(flex_s, flex_e, possible, _smoothstep(np.clip(5.0 * ramp, 0.0, 1.0)), 0.0)
     return w * (flex_s + chest_pitch), (1.0 - w) * base_flex + w * flex_e, np.where(possible, over, 0.0)
 
 

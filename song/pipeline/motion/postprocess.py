@@ -36,7 +36,7 @@ from song.geometry.rotations import (
     yaw_of_matrix,
 )
 from song.geometry.skeleton import JOINT_INDEX as J
-from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw
+from song.pipeline.motion.types import Motion, Trajectory, body_heading, path_yaw, true_runs
 
 LEGS = (
     (J["left_hip"], J["left_knee"], J["left_ankle"], J["left_foot"]),
@@ -166,12 +166,6 @@ def detect_contacts(
     return out
 
 
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """Inclusive ``(start, end)`` index pairs of the True runs."""
-    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
-
-
 def foot_offsets(joints: np.ndarray, rest: np.ndarray, contacts: np.ndarray, blend_frames: int) -> np.ndarray:
     """Ankle translations ``(T, 2, 3)`` that lock planted feet, blend in/out and keep clearance.
 
@@ -183,7 +177,8 @@ def foot_offsets(joints: np.ndarray, rest: np.ndarray, contacts: np.ndarray, ble
     for side, (_, _, ankle, toe) in enumerate(LEGS):
         gap = _sole_gap(joints, rest, ankle, toe)
         weight = np.zeros(n)
-        for a, b in _runs(contacts[:, side]):
+        for a, stop in true_runs(contacts[:, side]):
+            b = stop - 1  # the run's last frame
             lo, hi = max(a - blend_frames, 0), min(b + blend_frames, n - 1) + 1
             f = frames[lo:hi]
             core = (f >= a) & (f <= b)

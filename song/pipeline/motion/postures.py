@@ -26,7 +26,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from song.geometry.outline import nearest_on_outline
-from song.pipeline.motion.types import held_rows, min_jerk
+from song.pipeline.motion.types import held_rows, min_jerk, true_runs
 
 SURFACE_KEYWORDS = ("counter", "reception", "checkout", "desk", "help", "bar", "pharmacy", "workstation", "table")
 SURFACE_HEIGHT_M = (0.7, 1.2)  # tops between these heights take resting hands
@@ -95,9 +95,7 @@ def stay_track(xy: np.ndarray, speed: np.ndarray, fps: float, stops: list, objec
         if obj is None or not accept(obj):
             continue
         at = standing & (np.hypot(*(xy - np.asarray(spot, dtype=np.float64)).T) < radius)
-        # each maximal run of frames at the spot, trimmed at both ends
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], at.astype(np.int8), [0]])))
-        for start, end in zip(edges[::2], edges[1::2], strict=True):
+        for start, end in true_runs(at):  # each maximal run of frames at the spot, trimmed at both ends
             lo, hi = start + settle, end - leave
             if hi - lo < MIN_REST_S * fps:
                 continue
@@ -152,9 +150,7 @@ def browse_plan(shelf: np.ndarray, fps: float, seed: int) -> Browse:
     touch = np.concatenate([min_jerk(np.linspace(0.0, 1.0, int(round(s * fps)))) for s in REACH_S[:1]]
                            + [np.ones(int(round(REACH_S[1] * fps)))]
                            + [min_jerk(np.linspace(1.0, 0.0, int(round(REACH_S[2] * fps))))])  # fmt: skip
-    held = np.flatnonzero(np.isfinite(shelf[:, 0]))
-    for stay in np.split(held, np.flatnonzero(np.diff(held) > 1) + 1) if len(held) else []:
-        lo, hi = int(stay[0]), int(stay[-1]) + 1
+    for lo, hi in true_runs(np.isfinite(shelf[:, 0])):  # each stay
         f, previous = lo, None
         while f < hi:
             point = np.array([rng.uniform(-LOOK_SPAN_M, LOOK_SPAN_M),

@@ -30,6 +30,12 @@ def _rate_limited(values: np.ndarray, steps: np.ndarray) -> np.ndarray:  # pragm
     return 0.5 * (forward + backward)
 
 
+def true_runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """Half-open ``(start, stop)`` frame ranges of the runs of True in ``flags`` (T,)."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(flags).astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
 def held_rows(values: np.ndarray) -> np.ndarray:
     """``values`` (T, K) with nan rows replaced by the nearest earlier finite row (the first one before it)."""
     ok = np.isfinite(values[:, 0])

@@ -22,7 +22,7 @@ from song.pipeline.motion.postures import (
     shelf_track,
     surface_track,
 )
-from song.pipeline.motion.types import Trajectory
+from song.pipeline.motion.types import Trajectory, true_runs
 
 FPS = 30
 
@@ -200,13 +200,13 @@ def test_sample_crowds_rest_hands_on_counters(sample_run) -> None:
         for traj in trajectories:
             if traj.surface is None:
                 continue
-            held = np.flatnonzero(np.isfinite(traj.surface[:, 0]))
+            held = np.isfinite(traj.surface[:, 0])
             assert (traj.speed[held] < 0.01).all()  # only while standing
             joints = generate_gait(traj, style_for(traj.ped_id, MotionConfig())).joints
             hands = joints[:, [J["left_hand"], J["right_hand"]]]
             assert np.linalg.norm(np.diff(hands, axis=0), axis=-1).max() < 0.12  # no frame jumps (< 3.6 m/s)
-            for stay in np.split(held, np.flatnonzero(np.diff(held) > 1) + 1):
-                middle = stay[len(stay) // 2]
+            for lo, hi in true_runs(held):
+                middle = (lo + hi) // 2
                 edge, top = traj.surface[middle]
                 on = np.abs(joints[middle, [J["left_hand"], J["right_hand"]], 2] - top - PALM_M).max() < 0.01
                 if top >= 0.8:
