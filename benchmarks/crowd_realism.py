@@ -10,8 +10,9 @@ with a reason when absent) and, as an indoor check, the Edinburgh Informatics Fo
 tracker, ~9 fps: its speeds are approximate and its pair distances unreliable). Also per configuration: the closest centre distance at any frame (walking
 or standing, against 2r), the share of intents that arrive, the walking share among present
 pedestrians per second between 5 s and 55 s (mean over scenes, and over the sample scenes alone: the
-target's set; the minimum second), and the crowd
-stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
+target's set; the minimum second), the gap between the body and the nearest wall or furniture over
+moving samples (median, p5, share under 0.15 m; from the scene's navmesh, conservative by up to a
+grid cell), and the crowd stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
 """
 
 from __future__ import annotations
@@ -34,12 +35,15 @@ from song.datasets.run import read_crowd, read_intents  # noqa: E402
 from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.datasets.scenes.generate import VENUE_ORDER, generate_scene  # noqa: E402
 from song.pipeline.chain import iter_run  # noqa: E402
+from song.pipeline.crowd.avoidance import WallDistance  # noqa: E402
+from song.pipeline.crowd.navmesh import load_navmesh  # noqa: E402
 from song.pipeline.crowd.realism import (  # noqa: E402
     Track,
     crowd_statistics,
     read_edinburgh_tracks,
     read_obsmat,
     stop_facing,
+    wall_clearances,
 )
 
 REAL = ROOT.parent / "shared" / "reference" / "pedestrians"
@@ -63,12 +67,23 @@ def _walking_share(tracks: list[Track]) -> np.ndarray:
     return out
 
 
+def _wall_stats(gaps: np.ndarray) -> dict:
+    """The body's gap to walls and furniture over moving samples: median, p5, share under 0.15 m."""
+    if not len(gaps):
+        return {}
+    return {
+        "wall_gap_median_m": round(float(np.median(gaps)), 3),
+        "wall_gap_p5_m": round(float(np.percentile(gaps, 5)), 3),
+        "wall_gap_below_0.15_share": round(float(np.mean(gaps < 0.15)), 4),
+    }
+
+
 def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
     config = SongConfig(seed=1, crowd={"avoidance": avoidance}, intents={"speed_profile": profile})
     run = work / f"{avoidance}-{profile}"
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
-    tracks, closest, shares, sample_shares, arrived, total, facing = [], np.inf, [], [], 0, 0, []
+    tracks, closest, shares, sample_shares, arrived, total, facing, walls = [], np.inf, [], [], 0, 0, [], []
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
@@ -81,6 +96,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
         facing += stop_facing(crowd, read_intents(scene / "intents.json").intents, objects)
         scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
         tracks.append(scene_tracks)
+        field = WallDistance(load_navmesh(scene))
+        walls.append(wall_clearances(scene_tracks, lambda xy, f=field: f.at(xy) - r))
         shares.append(_walking_share(scene_tracks))
         if not scene.name.startswith("gen_"):
             sample_shares.append(shares[-1])
@@ -100,6 +117,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
             "walking_share_5_55_min": round(float(np.min(share)), 4) if len(share) else None,
             "walking_share_samples_5_55_mean": round(float(np.mean(sample)), 4) if len(sample) else None,
             "walking_share_samples_5_55_min": round(float(np.min(sample)), 4) if len(sample) else None,
+            **_wall_stats(np.concatenate(walls) if walls else np.zeros(0)),
             "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
             "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
@@ -120,6 +138,7 @@ def markdown(rows: dict[str, dict]) -> str:
         ("standing share", lambda s: s["standing_share"]),
         ("tortuosity", lambda s: s["tortuosity_median"]),
         ("accel RMS, m/s²", lambda s: s["acceleration_rms_mps2"]),
+        ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),
     ]
     lines = ["| set | " + " | ".join(c for c, _ in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for name, stats in rows.items():

@@ -14,8 +14,10 @@ measured. With ``MOVING_MPS`` = 0.2 m/s as the walking threshold:
 - **tortuosity**: path length over displacement in 5 s windows of walking (displacement ≥ 1 m);
 - **acceleration RMS** over moving samples (finite differences of the resampled velocity).
 
-SONG's crowds also know what people stand at: :func:`stop_facing` measures how far from their
-object pedestrians face while standing at it (no real reference: the annotations have no objects).
+SONG's crowds also know what people stand at and what walls they pass: :func:`stop_facing` measures
+how far from their object pedestrians face while standing at it, and :func:`wall_clearances` how
+close walkers come to walls and furniture (no real reference for either: the annotations have no
+objects, and no walls indoors).
 """
 
 from __future__ import annotations
@@ -178,6 +180,21 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         present = np.bincount(np.concatenate([np.round(t.t * RATE_HZ).astype(np.int64) for t in tracks]))
         stats["density_per_m2"] = round(float(present[present > 0].mean()) / walkable_m2, 4)
     return stats
+
+
+def wall_clearances(tracks: list[Track], clearance_at) -> np.ndarray:
+    """The body's gap to the nearest wall or furniture at every moving sample (2.5 Hz), m.
+
+    Args:
+        tracks: one scene's pedestrians (resampled here).
+        clearance_at: (M, 2) positions -> (M,) gap between the body and the nearest obstacle, m.
+    """
+    gaps = [np.zeros(0)]
+    for track in resample(tracks):
+        moving = np.hypot(*_velocity(track).T) > MOVING_MPS
+        if moving.any():
+            gaps.append(np.asarray(clearance_at(track.xy[moving]), dtype=np.float64))
+    return np.concatenate(gaps)
 
 
 def read_obsmat(path: str | Path) -> list[Track]:

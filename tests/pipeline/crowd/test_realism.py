@@ -15,6 +15,7 @@ from song.pipeline.crowd.realism import (
     read_edinburgh_tracks,
     read_obsmat,
     resample,
+    wall_clearances,
 )
 
 REAL = Path(__file__).resolve().parents[3].parent / "shared" / "reference" / "pedestrians"
@@ -54,6 +55,15 @@ def test_speed_and_standing_share() -> None:
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason=f"the real reference trajectories are not here ({REAL})")
+def test_wall_clearances_are_taken_over_moving_samples() -> None:
+    """A walk 0.3 m from a wall (y = 0) gives its body's gap at every 2.5 Hz sample; someone standing gives none."""
+    along = walk((0.0, 0.3), (1.0, 0.0), 0.0, 10.0)
+    standing = Track(np.arange(0.0, 10.0, 0.1), np.tile([5.0, 0.26], (100, 1)))
+    gaps = wall_clearances([along, standing], lambda xy: xy[:, 1] - 0.25)
+    assert len(gaps) == 26  # 0, 0.4, ..., 10 s
+    np.testing.assert_allclose(gaps, 0.05)
+
+
 def test_real_sequences_read_as_their_readme_says() -> None:
     """ETH from the EWAP obsmat: median walking speed 1.49 m/s (the shared README's figure); the indoor
     Edinburgh atrium: 146 tracks, walking speed near 1.07 m/s at the nominal 9 fps."""
