@@ -54,7 +54,6 @@ def test_speed_and_standing_share() -> None:
     assert stats["standing_share"] == pytest.approx(0.5, abs=0.03)
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason=f"the real reference trajectories are not here ({REAL})")
 def test_wall_clearances_are_taken_over_moving_samples() -> None:
     """A walk 0.3 m from a wall (y = 0) gives its body's gap at every 2.5 Hz sample; someone standing gives none."""
     along = walk((0.0, 0.3), (1.0, 0.0), 0.0, 10.0)
@@ -64,6 +63,7 @@ def test_wall_clearances_are_taken_over_moving_samples() -> None:
     np.testing.assert_allclose(gaps, 0.05)
 
 
+@pytest.mark.skipif(not REAL.is_dir(), reason=f"the real reference trajectories are not here ({REAL})")
 def test_real_sequences_read_as_their_readme_says() -> None:
     """ETH from the EWAP obsmat: median walking speed 1.49 m/s (the shared README's figure); the indoor
     Edinburgh atrium: 146 tracks, walking speed near 1.07 m/s at the nominal 9 fps."""
