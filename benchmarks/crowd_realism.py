@@ -7,12 +7,13 @@ Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 
 ``--generated`` more procedural scenes, for every avoidance model × speed profile asked for, and
 computes on the same footing the real ETH and Hotel sequences (EWAP obsmat files in ../shared; skipped
 with a reason when absent) and, as an indoor check, the Edinburgh Informatics Forum atrium (automatic
-tracker, ~9 fps: its speeds are approximate and its pair distances unreliable). Also per configuration: the closest centre distance at any frame (walking
-or standing, against 2r), the share of intents that arrive, the walking share among present
-pedestrians per second between 5 s and 55 s (mean over scenes, and over the sample scenes alone: the
-target's set; the minimum second), the gap between the body and the nearest wall or furniture over
-moving samples (median, p5, share under 0.15 m; from the scene's navmesh, conservative by up to a
-grid cell), and the crowd stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
+tracker, ~9 fps: its speeds are approximate and its pair distances unreliable). Also per
+configuration: the closest centre distance at any frame (walking or standing, against 2r), the share
+of intents that arrive, the walking share among present pedestrians per second between 5 s and 55 s
+(mean over scenes, and over the sample scenes alone: the target's set; the minimum second), the gap
+between the body and the nearest wall or furniture over moving samples (median, p5, share under
+0.15 m; from the scene's navmesh, conservative by up to a grid cell), and the crowd stage's median
+seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
 """
 
 from __future__ import annotations

@@ -140,8 +140,8 @@ def browse_plan(shelf: np.ndarray, fps: float, seed: int) -> Browse:
     either side of straight ahead, at ``LOOK_HEIGHT_M`` capped at the top); the gaze moves from one
     to the next with a minimum-jerk profile over ``GAZE_MOVE_S``. A look at a point the hand can touch
     (``REACH_HEIGHT_M``, ``REACH_SIDE_M``) ends in a touch with ``REACH_SHARE`` probability (the look
-    lasting as long as the touch needs, within the stay): once the gaze is there, the hand on that side goes out, rests and comes back over
-    ``REACH_S``. Deterministic in ``seed``.
+    lasting as long as the touch needs, within the stay): once the gaze is there, the hand on that
+    side goes out, rests and comes back over ``REACH_S``. Deterministic in ``seed``.
     """
     n = len(shelf)
     rng = np.random.default_rng(seed)
