@@ -12,8 +12,9 @@ configuration: the closest centre distance at any frame (walking or standing, ag
 of intents that arrive, the walking share among present pedestrians per second between 5 s and 55 s
 (mean over scenes, and over the sample scenes alone: the target's set; the minimum second), the gap
 between the body and the nearest wall or furniture over moving samples (median, p5, share under
-0.15 m; from the scene's navmesh, conservative by up to a grid cell), and the crowd stage's median
-seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
+0.15 m; from the scene's navmesh, conservative by up to a grid cell), the density on the walkable
+area (the scene's navmesh; median over scenes) beside the density on the floor people covered (the
+one measure the real recordings allow), and the crowd stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from song.pipeline.crowd.navmesh import load_navmesh  # noqa: E402
 from song.pipeline.crowd.realism import (  # noqa: E402
     Track,
     crowd_statistics,
+    density,
     read_edinburgh_tracks,
     read_obsmat,
     stop_facing,
@@ -85,6 +87,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
     tracks, closest, shares, sample_shares, arrived, total, facing, walls = [], np.inf, [], [], 0, 0, [], []
+    walkable: list[float] = []
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
@@ -97,8 +100,10 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
         facing += stop_facing(crowd, read_intents(scene / "intents.json").intents, objects)
         scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
         tracks.append(scene_tracks)
-        field = WallDistance(load_navmesh(scene))
+        mesh = load_navmesh(scene)
+        field = WallDistance(mesh)
         walls.append(wall_clearances(scene_tracks, lambda xy, f=field: f.at(xy) - r))
+        walkable.append(density(scene_tracks, mesh.area))
         shares.append(_walking_share(scene_tracks))
         if not scene.name.startswith("gen_"):
             sample_shares.append(shares[-1])
@@ -119,6 +124,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
             "walking_share_samples_5_55_mean": round(float(np.mean(sample)), 4) if len(sample) else None,
             "walking_share_samples_5_55_min": round(float(np.min(sample)), 4) if len(sample) else None,
             **_wall_stats(np.concatenate(walls) if walls else np.zeros(0)),
+            "density_walkable_per_m2": round(float(np.median(walkable)), 4) if walkable else None,
             "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
             "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
@@ -127,6 +133,11 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
         }
     )
     return stats
+
+
+def _density_cell(stats: dict) -> str:
+    walkable = stats.get("density_walkable_per_m2")
+    return f"{stats['density_covered_per_m2']}" + (f" ({walkable})" if walkable is not None else "")
 
 
 def markdown(rows: dict[str, dict]) -> str:
@@ -140,6 +151,7 @@ def markdown(rows: dict[str, dict]) -> str:
         ("tortuosity", lambda s: s["tortuosity_median"]),
         ("accel RMS, m/s²", lambda s: s["acceleration_rms_mps2"]),
         ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),
+        ("density, /m² covered (walkable)", lambda s: _density_cell(s)),
     ]
     lines = ["| set | " + " | ".join(c for c, _ in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for name, stats in rows.items():

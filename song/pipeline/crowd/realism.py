@@ -12,7 +12,11 @@ measured. With ``MOVING_MPS`` = 0.2 m/s as the walking threshold:
   head-on (> 135°), crossing, same direction (< 45°); p5/p25/median and the shares below 0.5, 0.6 and
   0.8 m per class, and the share of all such pairs passing closer than 0.6 m;
 - **tortuosity**: path length over displacement in 5 s windows of walking (displacement ≥ 1 m);
-- **acceleration RMS** over moving samples (finite differences of the resampled velocity).
+- **acceleration RMS** over moving samples (finite differences of the resampled velocity);
+- **density**: the mean number of pedestrians present per m², over the samples at which anyone is,
+  on the floor the recording's people covered (:func:`covered_area`: the 0.5 m cells holding any of
+  their samples; the real recordings give no walkable area), and, where it is known, on the walkable
+  area (:func:`density`).
 
 SONG's crowds also know what people stand at and what walls they pass: :func:`stop_facing` measures
 how far from their object pedestrians face while standing at it, and :func:`wall_clearances` how
@@ -35,6 +39,7 @@ MOVING_MPS = 0.2
 INTERACTION_M = 2.0
 HEAD_ON_DEG, SAME_DIR_DEG = 135.0, 45.0
 WINDOW_S = 5.0
+COVER_CELL_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -176,10 +181,27 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         "acceleration_rms_mps2": round(float(np.sqrt(np.mean(np.concatenate(accel) ** 2))), 3) if accel else None,
         "passes": {kind: _summary(values) for kind, values in passes.items()},
     }
+    covered = [density(group, covered_area(group)) for group in groups if group]
+    stats["density_covered_per_m2"] = round(float(np.median(covered)), 4) if covered else None
     if walkable_m2:
-        present = np.bincount(np.concatenate([np.round(t.t * RATE_HZ).astype(np.int64) for t in tracks]))
-        stats["density_per_m2"] = round(float(present[present > 0].mean()) / walkable_m2, 4)
+        stats["density_per_m2"] = round(density(tracks, walkable_m2), 4)
     return stats
+
+
+def covered_area(tracks: list[Track], cell_m: float = COVER_CELL_M) -> float:
+    """The floor the pedestrians covered, m²: the ``cell_m`` grid cells holding any of their 2.5 Hz samples."""
+    cells = [np.floor(track.xy / cell_m).astype(np.int64) for track in resample(tracks)]
+    return float(len(np.unique(np.concatenate(cells), axis=0))) * cell_m**2 if cells else 0.0
+
+
+def density(tracks: list[Track], area_m2: float) -> float:
+    """Mean number of pedestrians present per m² of ``area_m2``, over the 2.5 Hz samples at which anyone is."""
+    ticks = [np.round(track.t * RATE_HZ).astype(np.int64) for track in resample(tracks)]
+    if not ticks or area_m2 <= 0.0:
+        return 0.0
+    ticks = np.concatenate(ticks)
+    present = np.bincount(ticks - ticks.min())
+    return float(present[present > 0].mean()) / area_m2
 
 
 def wall_clearances(tracks: list[Track], clearance_at) -> np.ndarray:

@@ -10,7 +10,9 @@ import pytest
 
 from song.pipeline.crowd.realism import (
     Track,
+    covered_area,
     crowd_statistics,
+    density,
     pass_distances,
     read_edinburgh_tracks,
     read_obsmat,
@@ -61,6 +63,19 @@ def test_wall_clearances_are_taken_over_moving_samples() -> None:
     gaps = wall_clearances([along, standing], lambda xy: xy[:, 1] - 0.25)
     assert len(gaps) == 26  # 0, 0.4, ..., 10 s
     np.testing.assert_allclose(gaps, 0.05)
+
+
+def test_density_on_the_covered_floor_and_on_a_given_area() -> None:
+    """The mean number present per m², over the samples at which anyone is; the covered floor is 0.5 m cells."""
+    walker = walk((0.25, 0.25), (1.0, 0.0), 0.0, 10.0)  # 0.25 → 10.25 m along y = 0.25: cells 0..20 of row 0
+    stander = walk((0.25, 5.25), (0.0, 0.0), 0.0, 10.0)  # one more cell
+    early = walk((0.25, 5.25), (0.0, 0.0), 0.0, 4.8)  # present for 13 of the walker's 26 samples
+    assert covered_area([walker, stander]) == pytest.approx(22 * 0.25)
+    assert density([walker, stander], 10.0) == pytest.approx(0.2)
+    assert density([walker, early], 10.0) == pytest.approx(0.15)
+    stats = crowd_statistics([walker, stander], walkable_m2=10.0)
+    assert stats["density_per_m2"] == pytest.approx(0.2)
+    assert stats["density_covered_per_m2"] == pytest.approx(2 / 5.5, abs=1e-4)
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason=f"the real reference trajectories are not here ({REAL})")
