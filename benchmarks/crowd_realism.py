@@ -14,7 +14,8 @@ of intents that arrive, the walking share among present pedestrians per second b
 between the body and the nearest wall or furniture over moving samples (median, p5, share under
 0.15 m; from the scene's navmesh, conservative by up to a grid cell), the density on the walkable
 area (the scene's navmesh; median over scenes) beside the density on the floor people covered (the
-one measure the real recordings allow), and the crowd stage's median seconds per scene. Prints JSON (and a markdown table with ``--markdown``).
+one measure the real recordings allow), and the crowd stage's median seconds per scene. Prints JSON
+(and a markdown table with ``--markdown``).
 """
 
 from __future__ import annotations
