@@ -42,3 +42,20 @@ def emit(result: dict) -> None:
     """Print the one JSON object a benchmark script reports."""
     json.dump(result, sys.stdout, indent=2, sort_keys=True)
     sys.stdout.write("\n")
+
+
+def crowd_outcomes(statuses: list[dict]) -> dict:
+    """Shares of a crowd's pedestrians (``crowd_status.json`` values) by outcome, and the stops given up.
+
+    ``arrived``: reached the last stop of the routine; ``routine_complete``: reached it without giving
+    up a stop on the way; ``removed``: dropped from the crowd (``timeout`` is the rest).
+    """
+    total = max(len(statuses), 1)
+    arrived = [s for s in statuses if s["status"] == "arrived"]
+    return {
+        "arrived_share": round(len(arrived) / total, 4),
+        "routine_complete_share": round(sum(not s.get("skipped_stops") for s in arrived) / total, 4),
+        "removed_share": round(sum(s["status"] == "removed" for s in statuses) / total, 4),
+        "stops_skipped": sum(len(s.get("skipped_stops", [])) for s in statuses),
+        "pedestrians": len(statuses),
+    }

@@ -8,8 +8,9 @@ Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 
 computes on the same footing the real ETH and Hotel sequences (EWAP obsmat files in ../shared; skipped
 with a reason when absent) and, as an indoor check, the Edinburgh Informatics Forum atrium (automatic
 tracker, ~9 fps: its speeds are approximate and its pair distances unreliable). Also per
-configuration: the closest centre distance at any frame (walking or standing, against 2r), the share
-of intents that arrive, the walking share among present pedestrians per second between 5 s and 55 s
+configuration: the closest centre distance at any frame (walking or standing, against 2r), the shares
+of intents that reach their last stop, that complete their whole routine (no stop given up on the way)
+and that are removed, the walking share among present pedestrians per second between 5 s and 55 s
 (mean over scenes, and over the sample scenes alone: the target's set; the minimum second), the gap
 between the body and the nearest wall or furniture over moving samples (median, p5, share under
 0.15 m; from the scene's navmesh, conservative by up to a grid cell), the density on the walkable
@@ -31,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import ROOT, emit  # noqa: E402
+from _common import ROOT, crowd_outcomes, emit  # noqa: E402
 
 from song.config import SongConfig  # noqa: E402
 from song.datasets.run import read_crowd, read_intents  # noqa: E402
@@ -87,14 +88,12 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
     run = work / f"{avoidance}-{profile}"
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
-    tracks, closest, shares, sample_shares, arrived, total, facing, walls = [], np.inf, [], [], 0, 0, [], []
+    tracks, closest, shares, sample_shares, statuses, facing, walls = [], np.inf, [], [], [], [], []
     walkable: list[float] = []
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
-        status = json.loads((scene / "crowd_status.json").read_text())
-        arrived += sum(v["status"] == "arrived" for v in status.values())
-        total += len(status)
+        statuses += json.loads((scene / "crowd_status.json").read_text()).values()
         if len(crowd.ids) == 0:
             continue
         objects = load_scene_package(scenes / scene.name).semantic_map.object_by_id()
@@ -119,7 +118,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
         {
             "closest_any_frame_m": round(closest, 4),
             "contact_limit_m": round(2 * r - 0.01, 3),
-            "arrived_share": round(arrived / max(total, 1), 4),
+            **crowd_outcomes(statuses),
             "walking_share_5_55_mean": round(float(np.mean(share)), 4) if len(share) else None,
             "walking_share_5_55_min": round(float(np.min(share)), 4) if len(share) else None,
             "walking_share_samples_5_55_mean": round(float(np.mean(sample)), 4) if len(sample) else None,

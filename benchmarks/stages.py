@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import ROOT, emit  # noqa: E402
+from _common import ROOT, crowd_outcomes, emit  # noqa: E402
 
 from song.config import SongConfig  # noqa: E402
 from song.pipeline.binding.pool import ensure_pool  # noqa: E402
@@ -43,14 +43,12 @@ def main() -> None:
         }
         for name in stages
     }
-    arrived = sum(s["status"] == "arrived" for s in statuses)
     emit(
         {
             "scenes": len(results),
             "failed": [r.scene_id for r in results if r.status != "ok"],
             "stage_seconds_per_scene": per_stage,
-            "pedestrians": len(statuses),
-            "arrived_fraction": round(arrived / max(len(statuses), 1), 3),
+            **crowd_outcomes(statuses),
             "targets_median_s": TARGETS,
         }
     )

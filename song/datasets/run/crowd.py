@@ -19,7 +19,7 @@ from typing import Literal
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
 
 from song.config import DEFAULT_FPS
 from song.datasets.run.layout import CROWD_FILE, CROWD_STATUS_FILE
@@ -139,6 +139,10 @@ class PedestrianStatus(BaseModel):
     status: Literal["arrived", "removed", "timeout"]
     reason: str = ""
     arrival_s: float | None = None
+    skipped_stops: list[int] = Field(
+        default_factory=list,
+        description="routine stops (indices into Intent.route()) given up because the way stayed blocked",
+    )
 
 
 _STATUS = TypeAdapter(dict[int, PedestrianStatus])

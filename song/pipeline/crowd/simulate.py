@@ -15,9 +15,12 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
 5. stall detection: no progress along the path for ``stall_time_s`` → a full replan around everyone
    standing (Detour's temporary obstacles); stalled again → the pedestrian yields: it steps out of the
    way of the walkers around it (to a free spot 0.7 or 1.4 m away, the one farthest from their ways),
-   waits there ``YIELD_S`` and walks on; after ``MAX_YIELDS`` yields a further stall removes it, its
-   reason recorded. (Stepping aside instead of standing still where it stalled: 3 against 3 through a
-   1.0 m door all arrive, 5 of 6 before; in the generated lobby 30-32 of 32 arrive, 26 before.)
+   waits there ``YIELD_S`` and walks on; after ``MAX_YIELDS`` yields a further stall is final: a walker
+   with stops still ahead gives this one up and walks on to its next (recorded in its status's
+   ``skipped_stops``), one on its last leg is removed, its reason recorded. (Stepping aside instead of
+   standing still where it stalled: 3 against 3 through a 1.0 m door all arrive, 5 of 6 before; in the
+   generated lobby 30-32 of 32 arrive, 26 before. Giving up a stop instead of removing the walker:
+   removals over nine seeds of sample and generated scenes 26 -> 8, docs/crowd.md.)
 
 A removal does not re-simulate the crowd from t = 0: the run drops the pedestrian and goes on, then
 rolls back once to before the first frame in which any dropped pedestrian could have changed someone
@@ -88,7 +91,8 @@ class CrowdPlan:
 
     Attributes:
         ped_ids: (P,) int. xy: (P, F, 2) m. yaw: (P, F) rad. speed: (P, F) m/s. fps: frames per second.
-        status: per pedestrian id: {"status": "arrived" | "removed" | "timeout", "reason", "arrival_s"}.
+        status: per pedestrian id: {"status": "arrived" | "removed" | "timeout", "reason", "arrival_s",
+            "skipped_stops"} (:class:`song.datasets.run.PedestrianStatus`; "arrived": at its last stop).
     """
 
     ped_ids: np.ndarray
@@ -131,6 +135,7 @@ class _Walkers:
     influence: np.ndarray  # (N,) first frame in which this pedestrian changed anyone else's step (inf: none yet)
     face: np.ndarray  # (N, 2) the point a pedestrian standing at an object turns to (nan: none, or walking), m
     waited: np.ndarray  # (N,) s: how long the pedestrian has put off walking off, for someone passing close
+    skipped: list[list[int]]  # per pedestrian: the routine stops (indices into Intent.route()) it gave up
 
 
 def _snapshot(w: _Walkers) -> _Walkers:
@@ -270,6 +275,7 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         influence=np.full(n, np.inf),
         face=face,
         waited=np.zeros(n),
+        skipped=[[] for _ in range(n)],
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
@@ -291,6 +297,21 @@ def _next_leg(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
     w.waited[k] = 0.0
     if not stops[leg][2]:  # a step aside is part of the leg it interrupts
         w.replanned[k], w.yields[k] = "", 0
+    return True
+
+
+def _skip_stop(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
+    """Walker k, stalled for good on its way to a stop that is not its last, gives that errand up and walks on.
+
+    The stop is recorded in ``w.skipped`` (its index in the routine) and k heads for its next stop at
+    once, without the dwell. False when the stop is its last (k is then removed, as before).
+    """
+    leg = int(w.leg[k])
+    if leg + 1 >= len(w.stops[k]):
+        return False
+    w.skipped[k].append(sum(not aside for _, _, aside, _ in w.stops[k][:leg]))
+    _next_leg(w, mesh, k, t)
+    w.dwell_until[k] = w.last_progress[k] = t
     return True
 
 
@@ -431,8 +452,9 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
                 w.last_progress[k] = t + YIELD_S
                 w.vel[k] = 0.0
             continue
-        if w.replanned[k]:
-            failed[int(k)] = f"stalled for {stall_s:g} s after replanning ({w.replanned[k]})"
+        if w.replanned[k]:  # stalled for good: it gives up this stop, or is removed when it is the last
+            if not _skip_stop(w, mesh, int(k), t):
+                failed[int(k)] = f"stalled for {stall_s:g} s after replanning ({w.replanned[k]})"
             continue
         w.last_progress[k] = t
         w.replanned[k] = _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
@@ -616,7 +638,12 @@ def plan_crowd(
 
     def drop(failures: dict[int, str]) -> np.ndarray:
         for k, reason in sorted(failures.items()):
-            status[intents[kept[k]].id] = {"status": "removed", "reason": reason, "arrival_s": None}
+            status[intents[kept[k]].id] = {
+                "status": "removed",
+                "reason": reason,
+                "arrival_s": None,
+                "skipped_stops": [],
+            }
         return np.isin(np.arange(len(kept)), list(failures))
 
     def start() -> _Run | None:
@@ -647,11 +674,12 @@ def plan_crowd(
         return CrowdPlan(
             np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros((0, 1)), np.zeros((0, 1)), cfg.fps, status
         )
-    for k, arrived, arrival in zip(kept, run.w.arrived, run.w.arrival, strict=True):
+    for k, arrived, arrival, skipped in zip(kept, run.w.arrived, run.w.arrival, run.w.skipped, strict=True):
         status[intents[k].id] = {
             "status": "arrived" if arrived else "timeout",
             "reason": "" if arrived else f"did not arrive within {cfg.max_duration_s - shift:g} s",
             "arrival_s": round(float(arrival) - shift, 4) if arrived else None,
+            "skipped_stops": skipped,
         }
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
     span = slice(min(lead, run.frame), run.frame + 1)  # the scenario: from t = 0 on

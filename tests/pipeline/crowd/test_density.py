@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from song.datasets.run.intents import Intent, Leg
 from song.datasets.scenes import load_scene_package
 from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities, settle_moves
 from song.pipeline.crowd._simulate_reference import (
@@ -99,3 +100,26 @@ def test_compiled_frame_moves_equal_their_reference_twin(make_scene) -> None:
             assert (new_pos[~moving] == pos[~moving]).all()
             checked += int((np.hypot(*(new_pos - pos).T) > 0).sum())
     assert checked > 300
+
+
+def test_a_walker_stalled_for_good_gives_up_that_stop_and_walks_on(make_scene) -> None:
+    # the social-force deadlock above, but every door walker then has an errand back in its own room: one
+    # stalled for good at the door gives the crossing up (its status says which stop) and walks on to it
+    def errand(i: Intent) -> Intent:
+        back = (i.start_xy[0], 3.4 - 0.1 * i.id)
+        legs = [Leg(activity="walk", goal_object="b", goal_xy=i.goal_xy, dwell_s=2.0)]
+        legs.append(Leg(activity="walk", goal_object="c", goal_xy=back))
+        return i.model_copy(update={"legs": legs})
+
+    single, _ = _plan(make_scene, SWAP_3V3, 1.0, "social_force")
+    intents = [errand(i) for i in SWAP_3V3]
+    plan, mesh = _plan(make_scene, intents, 1.0, "social_force")
+    check_crowd(plan, mesh, intents)
+    gave_up = {k for k, v in plan.status.items() if v["skipped_stops"]}
+    assert {k for k, v in single.status.items() if v["status"] == "removed"} & gave_up  # removed when it was the last
+    for k in gave_up:
+        info, row = plan.status[k], list(plan.ped_ids).index(k)
+        assert info["skipped_stops"] == [0] and info["status"] == "arrived", info
+        far = np.linalg.norm(plan.xy[row] - np.array(intents[k].goal_xy), axis=1).min()
+        assert far > 0.5  # it never got to the stop it gave up
+    assert all(not v["skipped_stops"] for v in plan.status.values() if v["status"] == "removed")
