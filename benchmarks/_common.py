@@ -48,13 +48,15 @@ def crowd_outcomes(statuses: list[dict]) -> dict:
     """Shares of a crowd's pedestrians (``crowd_status.json`` values) by outcome, and the stops given up.
 
     ``arrived``: reached the last stop of the routine; ``routine_complete``: reached it without giving
-    up a stop on the way; ``removed``: dropped from the crowd (``timeout`` is the rest).
+    up a stop on the way; ``gave_up``: stalled for good on the last leg (it stands out of the way);
+    ``removed``: could not start (``timeout`` is the rest).
     """
     total = max(len(statuses), 1)
     arrived = [s for s in statuses if s["status"] == "arrived"]
     return {
         "arrived_share": round(len(arrived) / total, 4),
         "routine_complete_share": round(sum(not s.get("skipped_stops") for s in arrived) / total, 4),
+        "gave_up_share": round(sum(s["status"] == "gave_up" for s in statuses) / total, 4),
         "removed_share": round(sum(s["status"] == "removed" for s in statuses) / total, 4),
         "stops_skipped": sum(len(s.get("skipped_stops", [])) for s in statuses),
         "pedestrians": len(statuses),

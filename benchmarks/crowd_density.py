@@ -1,16 +1,14 @@
 """Crowd planning cost against density in a generated lobby, one JSON object.
 
-.venv/bin/python benchmarks/crowd_density.py [--counts 8 16 32 64] [--reference]
+.venv/bin/python benchmarks/crowd_density.py [--counts 8 16 32 64]
 
 The scene: the procedural lobby ``lobby_0002`` (seed 7, the one ``benchmarks/render.py`` uses; its
 navmesh at r = 0.25 m is reported). For each count N we draw N synthetic single-leg intents on the
 mesh (seeded): starts and goals at least 0.8 m from each other's, paths 5–25 m long, speeds uniform
 0.5–1.0 m/s (the paper's profile), departures uniform over the first 20 s. The crowd planner
 (:func:`song.pipeline.crowd.simulate.plan_crowd`) runs on them with the default crowd settings; we
-report wall seconds, pedestrians removed, arrivals and the cost ratio of the largest count to the
-smallest, and check that the kept pedestrians' tracks equal a fresh run of them alone (the removal
-contract). ``--reference`` also times the plain removal that re-runs the crowd from t = 0 after each
-removal (``rollback=False``) on the same intents, interleaved.
+report wall seconds, the simulated seconds, the pedestrians by outcome (arrived, gave up, still under
+way at the end) and the cost ratio of the largest count to the smallest.
 """
 
 from __future__ import annotations
@@ -37,6 +35,7 @@ from song.pipeline.crowd.simulate import plan_crowd  # noqa: E402
 from song.util import derive_rng  # noqa: E402
 
 SPACING_M, MIN_PATH_M, MAX_PATH_M, DEPART_S = 0.8, 5.0, 25.0, 20.0
+OUTCOMES = ("arrived", "gave_up", "timeout", "removed")
 
 
 def synthetic_intents(mesh: Navmesh, count: int, seed: int) -> list[Intent]:
@@ -78,41 +77,29 @@ def synthetic_intents(mesh: Navmesh, count: int, seed: int) -> list[Intent]:
     return intents
 
 
-def timed(intents, mesh, config, rollback: bool):
+def timed(intents, mesh, config) -> tuple[float, dict]:
+    """Wall seconds of one crowd plan, and its outcome counts."""
     cfg = config.crowd
     start = time.perf_counter()
-    plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "lobby", "crowd"), rollback=rollback)
+    plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "lobby", "crowd"))
     seconds = time.perf_counter() - start
-    removed = sum(v["status"] == "removed" for v in plan.status.values())
-    arrived = sum(v["status"] == "arrived" for v in plan.status.values())
-    return seconds, removed, arrived, plan
+    counts = {kind: sum(v["status"] == kind for v in plan.status.values()) for kind in OUTCOMES}
+    return seconds, {"simulated_s": round((plan.xy.shape[1] - 1) / plan.fps, 1), **counts}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--counts", type=int, nargs="+", default=[8, 16, 32, 64])
-    parser.add_argument("--reference", action="store_true", help="also time the re-run-from-zero removal")
     args = parser.parse_args()
     config = SongConfig()
     with tempfile.TemporaryDirectory() as tmp:
         package = load_scene_package(generate_scene("lobby_0002", "lobby", 7, Path(tmp), splat=False))
     mesh = scene_navmesh(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
-    timed(synthetic_intents(mesh, 4, 99), mesh, config, True)  # first-use compilation outside the timings
+    timed(synthetic_intents(mesh, 4, 99), mesh, config)  # first-use compilation outside the timings
     rows = []
     for count in args.counts:
-        intents = synthetic_intents(mesh, count, count)
-        seconds, removed, arrived, plan = timed(intents, mesh, config, True)
-        row = {"pedestrians": count, "seconds": round(seconds, 2), "removed": removed, "arrived": arrived}
-        if args.reference:
-            ref_s, _, _, ref = timed(intents, mesh, config, False)
-            row["reference_seconds"] = round(ref_s, 2)
-            row["speedup"] = round(ref_s / seconds, 2)
-            row["reference_removed"] = sum(v["status"] == "removed" for v in ref.status.values())
-        kept = set(plan.ped_ids.tolist())
-        _, _, _, fresh = timed([i for i in intents if i.id in kept], mesh, config, False)
-        same = fresh.xy.shape == plan.xy.shape and np.array_equal(fresh.ped_ids, plan.ped_ids)
-        row["equals_fresh_run_of_kept"] = bool(same and np.array_equal(fresh.xy, plan.xy))
-        rows.append(row)
+        seconds, outcomes = timed(synthetic_intents(mesh, count, count), mesh, config)
+        rows.append({"pedestrians": count, "seconds": round(seconds, 2), **outcomes})
     emit(
         {
             "scene": "lobby_0002 (seed 7)",

@@ -776,7 +776,7 @@ def carve_discs(mesh: Navmesh, centres: np.ndarray, radius: float) -> Navmesh:
     centres = np.ascontiguousarray(centres, dtype=np.float64).reshape(-1, 2)
     key = (float(radius), centres.tobytes())
     carvings = mesh._cache.setdefault("carvings", OrderedDict())
-    if key in carvings:  # a crowd replaying frames after a removal meets the same people standing again
+    if key in carvings:  # walkers stalled in the same frame meet the same people standing
         carvings.move_to_end(key)
         return carvings[key]
     if "region" not in mesh._cache:  # the mesh's polygons, the same for every carving (crowd replans)

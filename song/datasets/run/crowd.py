@@ -133,10 +133,15 @@ def read_crowd(path: str | Path) -> CrowdTracks:
 
 
 class PedestrianStatus(BaseModel):
-    """Outcome of one pedestrian in the crowd stage."""
+    """Outcome of one pedestrian in the crowd stage.
+
+    ``arrived``: at the last stop of its routine; ``gave_up``: stalled for good on its last leg, it
+    stepped out of the way and stands there (its track is kept); ``timeout``: still under way when the
+    simulation ended; ``removed``: it could not start (no track; ``reason`` says why).
+    """
 
     model_config = ConfigDict(extra="forbid")
-    status: Literal["arrived", "removed", "timeout"]
+    status: Literal["arrived", "gave_up", "timeout", "removed"]
     reason: str = ""
     arrival_s: float | None = None
     skipped_stops: list[int] = Field(

@@ -228,12 +228,11 @@ def record_frame(pos, vel, smooth, heading, face, max_turn, xy, yaw, speed, fram
 
 @numba.njit(cache=True, nogil=True)
 def avoidance_inputs(
-    pos, vel, cur, nxt, has_next, goal, speed, moving, radius, dt, reach, influence, frame, last_progress
+    pos, vel, cur, nxt, has_next, goal, speed, moving, radius, dt, reach, frame, last_progress
 ):  # pragma: no cover
     """Who the avoidance model steers this frame, and its inputs for them.
 
-    The walkers and whoever stands within ``reach`` of one (others cannot change the answer); those
-    standing are marked in ``influence`` (in place: they may change a walker's step in ``frame``).
+    The walkers and whoever stands within ``reach`` of one (others cannot change the answer).
     Returns ``(rows (M,), positions (M, 2), velocities (M, 2), preferred velocities (M, 2)``
     (:func:`preferred_velocities`), ``body radii (M,), speed limits (M,)`` (0 for those standing),
     ``held up (M,))``: seconds since each walker last made progress along its path (0 for those standing).
@@ -241,9 +240,6 @@ def avoidance_inputs(
     near = near_walkers(pos, moving, reach)
     pref = preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, dt)
     rows = np.nonzero(moving | near)[0]
-    for i in rows:
-        if near[i]:
-            influence[i] = min(influence[i], frame)
     limits = np.where(moving, speed, 0.0)[rows]
     held = np.where(moving, np.maximum(frame * dt - last_progress, 0.0), 0.0)[rows]
     return rows, pos[rows], vel[rows], pref[rows], np.full(len(rows), radius), limits, held
@@ -251,15 +247,14 @@ def avoidance_inputs(
 
 @numba.njit(cache=True, nogil=True)
 def hold_starts(
-    pos, vel, depart, dwell_until, last_progress, waited, moving, influence, frame, fps, lookahead, comfort, max_wait
+    pos, vel, depart, dwell_until, last_progress, waited, moving, frame, fps, lookahead, comfort, max_wait
 ):  # pragma: no cover
     """Pedestrians due to walk off in ``frame`` who wait for a walker passing close (``_wait_for_passers``).
 
     Due: walking at ``frame`` but not at the frame before (a departure or the end of a dwell), and not yet
     waited ``max_wait`` s for this start. One waits while a walker (not due itself), moving on at its
     velocity, would come within ``comfort`` of it in the next ``lookahead`` s: its start moves to the next
-    frame, it is taken out of ``moving``, and the walkers it waits for are marked in ``influence``.
-    All arrays are updated in place.
+    frame and it is taken out of ``moving``. All arrays are updated in place.
     """
     before, start = (frame - 1) / fps, (frame + 1) / fps
     n = len(pos)
@@ -278,7 +273,7 @@ def hold_starts(
             s = min(max(-(rx * ax + ry * ay) / max(ax * ax + ay * ay, 1e-12), 0.0), 1.0)
             if np.hypot(rx + s * ax, ry + s * ay) < comfort:
                 held = True
-                influence[j] = min(influence[j], frame)
+                break
         if held:
             if depart[k] > before:
                 depart[k] = start

@@ -17,14 +17,15 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    way of the walkers around it (to a free spot 0.7 or 1.4 m away, the one farthest from their ways),
    waits there ``YIELD_S`` and walks on; after ``MAX_YIELDS`` yields a further stall is final: a walker
    with stops still ahead gives this one up and walks on to its next (recorded in its status's
-   ``skipped_stops``), one on its last leg is removed, its reason recorded. (Stepping aside instead of
-   standing still where it stalled: 3 against 3 through a 1.0 m door all arrive, 5 of 6 before; in the
-   generated lobby 30-32 of 32 arrive, 26 before. Giving up a stop instead of removing the walker:
-   removals over nine seeds of sample and generated scenes 26 -> 8, docs/crowd.md.)
+   ``skipped_stops``); one on its last leg gives its routine up, steps out of the others' way and
+   stands there (status ``gave_up``). (Stepping aside instead of standing still where it stalled: 3
+   against 3 through a 1.0 m door all arrive, 5 of 6 before; in the generated lobby 30-32 of 32 arrive,
+   26 before.)
 
-A removal does not re-simulate the crowd from t = 0: the run drops the pedestrian and goes on, then
-rolls back once to before the first frame in which any dropped pedestrian could have changed someone
-else's step (:class:`_Run`), so the kept tracks are exactly those of a run without it.
+Nobody is removed once the simulation runs, so it runs once, from the earliest departure to the end
+(until the fourteenth session a walker stalled for good was removed and the crowd rolled back to
+before it first mattered, re-simulating much of the run; docs/crowd.md). Only pedestrians that cannot
+start (off the mesh, unreachable goals, overlapping starts) are left out, before the first frame.
 
 Pedestrians exist for the whole scenario: they stand at their start until departure, walk their
 routine's legs with a dwell at every intermediate stop, and stand at the last goal after arriving;
@@ -34,7 +35,7 @@ off lets a walker coming by go first (:func:`_wait_for_passers`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -78,7 +79,6 @@ ASIDE_SCAN_M = 4.0  # a yielding walker steps out of the ways of the walkers thi
 OVERLAP_PASSES = 3
 OVERLAP_MARGIN_M = 0.002  # overlap passes separate centres to 2r + this
 SEPARATION_REACH_M = 0.15  # beyond 2r + this (two frames' steps at 1.8 m/s, and more) no overlap pass joins two people
-SNAPSHOT_EVERY = 30  # frames between saved states a removal can roll back to (1 s)
 # a replan keeps this much more than body contact from everyone standing: a path squeezed past someone at
 # 2r (a wall on the other side) is legal but leaves avoidance no room, and the walker stalls in it again
 REPLAN_CLEARANCE_M = 0.1
@@ -91,8 +91,8 @@ class CrowdPlan:
 
     Attributes:
         ped_ids: (P,) int. xy: (P, F, 2) m. yaw: (P, F) rad. speed: (P, F) m/s. fps: frames per second.
-        status: per pedestrian id: {"status": "arrived" | "removed" | "timeout", "reason", "arrival_s",
-            "skipped_stops"} (:class:`song.datasets.run.PedestrianStatus`; "arrived": at its last stop).
+        status: per pedestrian id: {"status": "arrived" | "gave_up" | "timeout" | "removed", "reason",
+            "arrival_s", "skipped_stops"} (:class:`song.datasets.run.PedestrianStatus`).
     """
 
     ped_ids: np.ndarray
@@ -132,28 +132,10 @@ class _Walkers:
     stops: list[list[tuple[np.ndarray, float, bool, np.ndarray | None]]]
     leg: np.ndarray  # (N,) int: the leg being walked
     dwell_until: np.ndarray  # (N,) s: standing at an intermediate stop until then
-    influence: np.ndarray  # (N,) first frame in which this pedestrian changed anyone else's step (inf: none yet)
     face: np.ndarray  # (N, 2) the point a pedestrian standing at an object turns to (nan: none, or walking), m
     waited: np.ndarray  # (N,) s: how long the pedestrian has put off walking off, for someone passing close
     skipped: list[list[int]]  # per pedestrian: the routine stops (indices into Intent.route()) it gave up
-
-
-def _snapshot(w: _Walkers) -> _Walkers:
-    """A copy of the state that later frames cannot change (paths are replaced, never edited in place)."""
-    values = {}
-    for f in fields(w):
-        v = getattr(w, f.name)
-        values[f.name] = v.copy() if isinstance(v, np.ndarray) else [list(x) if isinstance(x, list) else x for x in v]
-    return _Walkers(**values)
-
-
-def _select(w: _Walkers, keep: np.ndarray) -> _Walkers:
-    """The state of the pedestrians where ``keep`` (N,) bool is True, in the same order."""
-    values = {}
-    for f in fields(w):
-        v = getattr(w, f.name)
-        values[f.name] = v[keep] if isinstance(v, np.ndarray) else [x for x, k in zip(v, keep, strict=True) if k]
-    return _Walkers(**values)
+    gave_up: np.ndarray  # (N,) s: when it gave its routine up, stalled for good on its last leg (nan: never)
 
 
 def _to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -272,10 +254,10 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         stops=stops,
         leg=np.zeros(n, dtype=np.int64),
         dwell_until=np.zeros(n),
-        influence=np.full(n, np.inf),
         face=face,
         waited=np.zeros(n),
         skipped=[[] for _ in range(n)],
+        gave_up=np.full(n, np.nan),
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
@@ -315,7 +297,26 @@ def _skip_stop(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
     return True
 
 
-def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float, frame: int) -> bool:
+def _give_up(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float) -> None:
+    """Walker k, stalled for good on its last leg, gives its routine up: it steps out of the way and stands there.
+
+    Its step aside (:func:`_step_aside`) becomes its last stop; with no spot free it stands where it is.
+    Like anyone who has finished, it steps aside again when it blocks a walker (:func:`_make_room`).
+    """
+    w.gave_up[k] = t
+    leg = int(w.leg[k])
+    if _step_aside(w, mesh, k, moving, radius, t):
+        del w.stops[k][leg + 1 :]  # the stop it gave up
+    else:
+        _stand(w, k, t)
+
+
+def _stand(w: _Walkers, k: int, t: float) -> None:
+    """Pedestrian k has finished where it is at time t."""
+    w.arrived[k], w.arrival[k], w.goal[k], w.vel[k] = True, t, w.pos[k].copy(), 0.0
+
+
+def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float) -> bool:
     """Stalled walker k yields: it steps out of the way of the walkers around it and waits there.
 
     The spot: among ``ASIDE_DIRECTIONS`` points at ``ASIDE_M`` and twice that around k, reachable in a
@@ -325,7 +326,6 @@ def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: 
     """
     dist = _length(w.pos - w.pos[k])
     around = np.flatnonzero(dist < ASIDE_SCAN_M)
-    _mark_influence(w, around, frame)  # where they stand and walk decides k's spot
     angles = np.arange(ASIDE_DIRECTIONS) * 2 * np.pi / ASIDE_DIRECTIONS
     ring = np.column_stack([np.cos(angles), np.sin(angles)])
     spots = w.pos[k] + np.vstack([ASIDE_M * ring, 2 * ASIDE_M * ring])
@@ -377,23 +377,16 @@ def _update_corners(w: _Walkers, mesh: Navmesh, moving: np.ndarray, check: bool)
             _set_path(w, k, np.vstack([detour, w.paths[k][w.corner[k] + 1 :]]))
 
 
-def _mark_influence(w: _Walkers, idx, frame: int) -> None:
-    """Pedestrians ``idx`` changed someone else's step in ``frame`` (a removal must roll back before it)."""
-    idx = np.asarray(idx, dtype=np.int64)
-    w.influence[idx] = np.minimum(w.influence[idx], frame)
-
-
 def _wait_for_passers(w: _Walkers, moving: np.ndarray, frame: int, cfg: CrowdConfig) -> None:
     """Pedestrians due to walk off in ``frame`` wait while a walker is passing closer than the comfort distance.
 
     People do not step out into someone's way: one about to leave a spot (its departure or the end of a
     dwell) waits while a walker would come within ``crowd.comfort_distance_m`` of it in the next
     ``PASSER_LOOKAHEAD_S`` (moving on as it does), for at most ``MAX_START_WAIT_S`` per start. Those
-    waiting are taken out of ``moving`` (in place) and start at the earliest in the next frame; the
-    walkers they wait for are marked as having changed their steps (a removal rolls back before that).
+    waiting are taken out of ``moving`` (in place) and start at the earliest in the next frame.
     """
     hold_starts(
-        w.pos, w.vel, w.depart, w.dwell_until, w.last_progress, w.waited, moving, w.influence, frame, cfg.fps,
+        w.pos, w.vel, w.depart, w.dwell_until, w.last_progress, w.waited, moving, frame, cfg.fps,
         PASSER_LOOKAHEAD_S, cfg.comfort_distance_m, MAX_START_WAIT_S,
     )  # fmt: skip
 
@@ -407,8 +400,7 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
     # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
     reach = max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M)
     rows, *inputs = avoidance_inputs(
-        w.pos, w.vel, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, r, dt, reach, w.influence, frame,
-        w.last_progress,
+        w.pos, w.vel, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, r, dt, reach, frame, w.last_progress,
     )  # fmt: skip
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
@@ -417,11 +409,11 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
     )  # fmt: skip
 
 
-def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, cfg: CrowdConfig):
-    """Record arrivals at stops and at the end; replan stalled pedestrians once; return those stalled again."""
-    t, stall_s, radius = frame / cfg.fps, cfg.stall_time_s, cfg.agent_radius_m
+def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, cfg: CrowdConfig) -> None:
+    """Record arrivals at stops and at the end; replan, yield, skip a stop or give up for stalled pedestrians."""
+    radius = cfg.agent_radius_m
     done, stalled = progress(
-        w.pos, w.goal, w.cur, w.rest, w.best, w.last_progress, moving, t, ARRIVE_M, PROGRESS_M, stall_s
+        w.pos, w.goal, w.cur, w.rest, w.best, w.last_progress, moving, t, ARRIVE_M, PROGRESS_M, cfg.stall_time_s
     )
     for k in done:
         aside = w.stops[k][w.leg[k]][2]
@@ -430,8 +422,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
             w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
             w.arrival[k] = t
         elif aside:
-            _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
-    failed: dict[int, str] = {}
+            _reroute_around_standing(w, mesh, int(k), moving, radius)
     for k in stalled:
         if _length(w.goal[k] - w.pos[k]) < CLOSE_ENOUGH_M:  # held a step from its spot: it stops where it is
             w.goal[k] = w.pos[k].copy()
@@ -441,35 +432,34 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, frame: int, 
                 w.arrival[k] = t
             continue
         if w.stops[k][w.leg[k]][2]:  # the crowd keeps it from its spot aside: it waits where it got to
-            _next_leg(w, mesh, int(k), t)
-            _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
+            if not _next_leg(w, mesh, int(k), t) and not np.isnan(w.gave_up[k]):
+                _stand(w, int(k), t)  # it gave its routine up: it stays where it got to
+                continue
+            _reroute_around_standing(w, mesh, int(k), moving, radius)
             continue
         if w.replanned[k] and w.yields[k] < MAX_YIELDS:
             # deadlocked face to face: step out of the others' way for a while, then try again
             w.yields[k] += 1
-            if not _step_aside(w, mesh, int(k), moving, radius, t, frame):
+            if not _step_aside(w, mesh, int(k), moving, radius, t):
                 w.yield_until[k] = t + YIELD_S
                 w.last_progress[k] = t + YIELD_S
                 w.vel[k] = 0.0
             continue
-        if w.replanned[k]:  # stalled for good: it gives up this stop, or is removed when it is the last
+        if w.replanned[k]:  # stalled for good: it gives up this stop, or its routine when the stop is the last
             if not _skip_stop(w, mesh, int(k), t):
-                failed[int(k)] = f"stalled for {stall_s:g} s after replanning ({w.replanned[k]})"
+                _give_up(w, mesh, int(k), moving, radius, t)
             continue
         w.last_progress[k] = t
-        w.replanned[k] = _reroute_around_standing(w, mesh, int(k), moving, radius, frame)
+        w.replanned[k] = _reroute_around_standing(w, mesh, int(k), moving, radius)
         if w.replanned[k].startswith("the way is blocked"):
-            _mark_influence(w, [k], frame)  # it sends people standing in its way off
             _make_room(w, mesh, k, moving, radius, t)
-    return failed
 
 
-def _reroute_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, frame: int):
+def _reroute_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float):
     """Walker k takes a path around everyone standing (a stall replan; the way on after a step aside).
 
     Returns why a later stall would be final (:func:`_replan_around_standing`).
     """
-    _mark_influence(w, np.flatnonzero(~moving), frame)  # everyone standing shapes the new path
     path, reason = _replan_around_standing(w, mesh, k, moving, radius)
     _set_path(w, k, path)
     w.best[k] = _remaining(w, np.array([k]))[0]
@@ -529,70 +519,26 @@ def _replan_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarr
     return (path if path is not None else w.paths[k][w.corner[k] :]), reason
 
 
-class _Run:
-    """One joint simulation from which pedestrians can be removed mid-way.
+def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfig):
+    """Run the crowd until everyone has finished or time is up: (xy (N, F, 2), yaw (N, F), speed (N, F)).
 
-    A pedestrian stalled for good is dropped at once and the run goes on (its earlier presence may have
-    shaped the others' steps: a ghost). When the run ends with ghosts, :meth:`rewind` rolls everyone
-    back to the last saved state (every ``SNAPSHOT_EVERY`` frames) before the first frame in which a
-    dropped pedestrian changed anyone else's step (``_Walkers.influence``; conservatively, anyone within
-    the avoidance model's neighbour distance of a walker) and the run goes on from there. The final
-    tracks are therefore exactly those of a fresh run of the kept pedestrians, while one pass collects
-    all the removals it can instead of re-simulating the crowd from t = 0 after each one.
+    F is the last frame simulated + 1 (at most ``cfg.max_duration_s`` · fps + 1).
     """
-
-    def __init__(self, w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfig) -> None:
-        self.w, self.mesh, self.avoid, self.cfg = w, mesh, avoid, cfg
-        n, frames = len(w.pos), int(cfg.max_duration_s * cfg.fps) + 1
-        self.xy, self.yaw, self.speed = np.zeros((n, frames, 2)), np.zeros((n, frames)), np.zeros((n, frames))
-        self.xy[:, 0], self.yaw[:, 0] = w.pos, w.heading
-        self.frame = 0  # the last frame recorded
-        self.ids = np.arange(n)  # each walker's row in the first state (drops remove rows)
-        self.snapshots = [(0, _snapshot(w), self.ids)]  # (frame, state, the rows it holds)
-        self.ghosts_from = np.inf  # the first frame a dropped pedestrian shaped someone's step
-
-    def advance(self) -> dict[int, str]:
-        """Simulate until everyone has arrived or time is up; return pedestrians stalled for good (then stop mid-frame)."""
-        w, cfg = self.w, self.cfg
-        while self.frame < self.xy.shape[1] - 1 and not w.arrived.all():
-            frame = self.frame + 1
-            t = frame / cfg.fps
-            moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
-            _wait_for_passers(w, moving, frame, cfg)
-            w.face[moving] = np.nan  # it has left its object
-            _step_frame(w, self.mesh, self.avoid, moving, cfg, frame)
-            failed = _check_progress(w, self.mesh, moving, frame, cfg)
-            if failed:
-                return failed
-            self._record(frame)
-        return {}
-
-    def _record(self, frame: int) -> None:
-        w = self.w
-        turn = FACE_TURN_RATE / self.cfg.fps
-        record_frame(w.pos, w.vel, w.smooth, w.heading, w.face, turn, self.xy, self.yaw, self.speed, frame)
-        self.frame = frame
-        if frame % SNAPSHOT_EVERY == 0:
-            self.snapshots.append((frame, _snapshot(w), self.ids))
-
-    def drop(self, gone: np.ndarray) -> None:
-        """Drop pedestrians ``gone`` (N,) bool, returned by :meth:`advance`, and finish the frame without them."""
-        keep = ~gone
-        self.ghosts_from = min(self.ghosts_from, float(self.w.influence[gone].min()))
-        self.ids = self.ids[keep]  # saved states keep everyone: a rewind selects the walkers left
-        self.xy, self.yaw, self.speed = self.xy[keep], self.yaw[keep], self.speed[keep]
-        self.w = _select(self.w, keep)
-        self._record(self.frame + 1)
-
-    def rewind(self) -> bool:
-        """Roll back to before the dropped pedestrians mattered; False when they never did (the run stands)."""
-        if np.isinf(self.ghosts_from):
-            return False
-        self.snapshots = [saved for saved in self.snapshots if saved[0] < self.ghosts_from]
-        self.frame, snap, ids = self.snapshots[-1]
-        self.w = _snapshot(_select(snap, np.isin(ids, self.ids)))
-        self.ghosts_from = np.inf
-        return True
+    n, frames = len(w.pos), int(cfg.max_duration_s * cfg.fps) + 1
+    xy, yaw, speed = np.zeros((n, frames, 2)), np.zeros((n, frames)), np.zeros((n, frames))
+    xy[:, 0], yaw[:, 0] = w.pos, w.heading
+    turn = FACE_TURN_RATE / cfg.fps
+    frame = 0
+    while frame < frames - 1 and not w.arrived.all():
+        frame += 1
+        t = frame / cfg.fps
+        moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
+        _wait_for_passers(w, moving, frame, cfg)
+        w.face[moving] = np.nan  # it has left its object
+        _step_frame(w, mesh, avoid, moving, cfg, frame)
+        _check_progress(w, mesh, moving, t, cfg)
+        record_frame(w.pos, w.vel, w.smooth, w.heading, w.face, turn, xy, yaw, speed, frame)
+    return xy[:, : frame + 1], yaw[:, : frame + 1], speed[:, : frame + 1]
 
 
 def _jitter(intents: list[Intent], cfg: CrowdConfig, rng: np.random.Generator) -> np.ndarray:
@@ -608,10 +554,9 @@ def plan_crowd(
     avoid: LocalAvoidance,
     cfg: CrowdConfig,
     rng: np.random.Generator,
-    rollback: bool = True,
     outlines: dict[str, np.ndarray] | None = None,
 ) -> CrowdPlan:
-    """Simulate all pedestrians jointly; those that cannot be planned are removed with a reason.
+    """Simulate all pedestrians jointly; those that cannot start are left out with a reason.
 
     Args:
         intents: the scene's pedestrians (start, goal, speed, departure).
@@ -619,10 +564,6 @@ def plan_crowd(
         avoid: the local-avoidance model (:func:`song.pipeline.crowd.avoidance.make_avoidance`).
         cfg: crowd parameters.
         rng: seeded generator (start jitter).
-        rollback: a pedestrian stalled for good is dropped and the others rolled back once a pass
-            ends (:class:`_Run`); False re-simulates everyone from t = 0 after each removal instead
-            (the plain reference the tests and ``benchmarks/crowd_density.py`` compare with). Either
-            way the kept pedestrians' tracks are those of a fresh run of them alone.
         outlines: footprints (K, 2) of the scene's objects by id: someone standing at its start object
             or at a stop turns to face the nearest point of that object's outline (a person waits at a
             counter facing it); without one it keeps the heading it arrived with.
@@ -635,8 +576,8 @@ def plan_crowd(
         cfg = cfg.model_copy(update={"max_duration_s": cfg.max_duration_s + shift})
     kept = np.arange(len(intents))
     status: dict[int, dict] = {}
-
-    def drop(failures: dict[int, str]) -> np.ndarray:
+    while len(kept):  # leaving one out can change another's start (overlaps), so check again
+        w, failures = _start([intents[k] for k in kept], mesh, cfg, jitter[kept], outlines or {})
         for k, reason in sorted(failures.items()):
             status[intents[kept[k]].id] = {
                 "status": "removed",
@@ -644,46 +585,34 @@ def plan_crowd(
                 "arrival_s": None,
                 "skipped_stops": [],
             }
-        return np.isin(np.arange(len(kept)), list(failures))
-
-    def start() -> _Run | None:
-        nonlocal kept
-        while len(kept):
-            w, failures = _start([intents[k] for k in kept], mesh, cfg, jitter[kept], outlines or {})
-            if not failures:
-                return _Run(w, mesh, avoid, cfg)
-            kept = kept[~drop(failures)]
-        return None
-
-    run = start()
-    while run is not None:
-        failures = run.advance()
+        kept = np.delete(kept, list(failures))
         if not failures:
-            if not run.rewind():
-                break
-            continue
-        gone = drop(failures)
-        kept = kept[~gone]
-        if not len(kept):
-            run = None
-        elif rollback:
-            run.drop(gone)
-        else:
-            run = start()
-    if run is None:
+            break
+    if not len(kept):
         return CrowdPlan(
             np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros((0, 1)), np.zeros((0, 1)), cfg.fps, status
         )
-    for k, arrived, arrival, skipped in zip(kept, run.w.arrived, run.w.arrival, run.w.skipped, strict=True):
-        status[intents[k].id] = {
-            "status": "arrived" if arrived else "timeout",
-            "reason": "" if arrived else f"did not arrive within {cfg.max_duration_s - shift:g} s",
-            "arrival_s": round(float(arrival) - shift, 4) if arrived else None,
-            "skipped_stops": skipped,
-        }
+    xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
+    for k, row in zip(kept, range(len(kept)), strict=True):
+        status[intents[k].id] = _outcome(w, row, cfg, shift)
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
-    span = slice(min(lead, run.frame), run.frame + 1)  # the scenario: from t = 0 on
-    return CrowdPlan(ids, run.xy[:, span].copy(), run.yaw[:, span].copy(), run.speed[:, span].copy(), cfg.fps, status)
+    span = slice(min(lead, xy.shape[1] - 1), None)  # the scenario: from t = 0 on
+    return CrowdPlan(ids, xy[:, span].copy(), yaw[:, span].copy(), speed[:, span].copy(), cfg.fps, status)
+
+
+def _outcome(w: _Walkers, k: int, cfg: CrowdConfig, shift: float) -> dict:
+    """Pedestrian k's entry of the crowd status (times on the scenario's clock, ``shift`` s after the simulation's)."""
+    if not np.isnan(w.gave_up[k]):
+        reason = (
+            f"stalled for {cfg.stall_time_s:g} s after replanning ({w.replanned[k]}) at "
+            f"{w.gave_up[k] - shift:.1f} s; it stepped out of the way and stands there"
+        )
+        return {"status": "gave_up", "reason": reason, "arrival_s": None, "skipped_stops": w.skipped[k]}
+    if w.arrived[k]:
+        return {"status": "arrived", "reason": "", "arrival_s": round(float(w.arrival[k]) - shift, 4),
+                "skipped_stops": w.skipped[k]}  # fmt: skip
+    reason = f"did not arrive within {cfg.max_duration_s - shift:g} s"
+    return {"status": "timeout", "reason": reason, "arrival_s": None, "skipped_stops": w.skipped[k]}
 
 
 def _lead_in_frames(intents: list[Intent], fps: int) -> int:
