@@ -286,7 +286,7 @@ def _skip_stop(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
     """Walker k, stalled for good on its way to a stop that is not its last, gives that errand up and walks on.
 
     The stop is recorded in ``w.skipped`` (its index in the routine) and k heads for its next stop at
-    once, without the dwell. False when the stop is its last (k is then removed, as before).
+    once, without the dwell. False when the stop is its last (k then gives its routine up, :func:`_give_up`).
     """
     leg = int(w.leg[k])
     if leg + 1 >= len(w.stops[k]):
@@ -593,7 +593,7 @@ def plan_crowd(
             np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros((0, 1)), np.zeros((0, 1)), cfg.fps, status
         )
     xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
-    for k, row in zip(kept, range(len(kept)), strict=True):
+    for row, k in enumerate(kept):
         status[intents[k].id] = _outcome(w, row, cfg, shift)
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
     span = slice(min(lead, xy.shape[1] - 1), None)  # the scenario: from t = 0 on
