@@ -152,6 +152,7 @@ def markdown(rows: dict[str, dict]) -> str:
         ("accel RMS, m/s²", lambda s: s["acceleration_rms_mps2"]),
         ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),
         ("density, /m² covered (walkable)", _density_cell),
+        ("last stop / whole routine reached", lambda s: f"{s['arrived_share']} / {s['routine_complete_share']}"),
     ]
     lines = ["| set | " + " | ".join(c for c, _ in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for name, stats in rows.items():
