@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from song.config import SongConfig
-from song.datasets.run import read_crowd, read_intents
+from song.datasets.run import read_crowd, read_crowd_status, read_intents
 from song.datasets.scenes import load_scene_package
+from song.errors import FormatError
 from song.pipeline.chain import iter_run
 from song.pipeline.crowd import load_navmesh
 from song.pipeline.crowd.realism import stop_facing
@@ -48,6 +49,20 @@ def test_most_intents_arrive(sample_run: Path) -> None:
     arrived = sum(v["status"] == "arrived" for v in statuses)
     assert arrived / len(statuses) >= 0.95, statuses
     assert all(v["reason"] for v in statuses if v["status"] != "arrived")
+
+
+def test_crowd_status_reads_back_and_names_the_bad_file(sample_run: Path, tmp_path: Path) -> None:
+    for scene in SCENES:
+        folder = sample_run / "scenes" / scene
+        status = read_crowd_status(folder)
+        kept = {int(k) for k in read_crowd(folder).ids}
+        assert kept == {k for k, v in status.items() if v.status != "removed"}  # only who could not start has no track
+    old = tmp_path / "crowd_status.json"  # written before skipped stops were recorded
+    old.write_text('{"3": {"status": "removed", "reason": "start overlaps pedestrian 1", "arrival_s": null}}')
+    assert read_crowd_status(old)[3].skipped_stops == []
+    old.write_text('{"3": {"status": "lost", "reason": ""}}')
+    with pytest.raises(FormatError, match="crowd_status.json"):
+        read_crowd_status(old)
 
 
 def test_same_seed_identical_parquet(sample_run: Path, tmp_path: Path) -> None:
