@@ -1,4 +1,4 @@
-"""Dense crowds: doorway swaps, removals that roll the crowd back, the compiled pair loops."""
+"""Dense crowds: doorway swaps, walkers who give up a stop or their routine, the compiled pair loops."""
 
 from __future__ import annotations
 
