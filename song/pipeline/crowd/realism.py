@@ -261,9 +261,10 @@ def read_edinburgh_tracks(path: str | Path) -> list[Track]:
 def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_stay_s: float = 4.0) -> list[float]:
     """How far (deg) from its object each pedestrian faces while standing at it, one value per stay.
 
-    A stay: at least ``min_stay_s`` standing (< 0.01 m/s) within 0.5 m of an intent's start or 0.3 m of
-    a leg's goal; measured after its first ``settle_s`` (a turn on the spot) as the median |yaw −
-    direction to the nearest point of the object's outline|.
+    A stay: at least ``min_stay_s`` standing without a break (< 0.01 m/s) within 0.5 m of an intent's
+    start or 0.3 m of a leg's goal (someone held up in a jam beside the spot later is not staying there);
+    measured after its first ``settle_s`` (a turn on the spot) as the median |yaw − direction to the
+    nearest point of the object's outline|.
 
     Args:
         crowd: the scene's crowd table (:func:`song.datasets.run.read_crowd`).
@@ -282,14 +283,14 @@ def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_
         for oid, spot, near in stays:
             if oid not in objects:
                 continue
-            at = (np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & (crowd.speed[k] < 0.01)
-            frames = np.flatnonzero(at)
-            if len(frames) < min_stay_s * crowd.fps:
-                continue
-            settled = frames[frames >= frames[0] + settle_s * crowd.fps]
-            p = crowd.xy[k, settled].mean(axis=0)
-            q = nearest_on_outline(np.asarray(objects[oid].footprint), p[None])[0][0]
-            want = np.arctan2(q[1] - p[1], q[0] - p[0])
-            miss = np.abs((crowd.yaw[k, settled] - want + np.pi) % (2 * np.pi) - np.pi)
-            out.append(float(np.degrees(np.median(miss))))
+            at = np.flatnonzero((np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & (crowd.speed[k] < 0.01))
+            for frames in np.split(at, np.flatnonzero(np.diff(at) > 1) + 1):  # each unbroken stay
+                if len(frames) < min_stay_s * crowd.fps:
+                    continue
+                settled = frames[frames >= frames[0] + settle_s * crowd.fps]
+                p = crowd.xy[k, settled].mean(axis=0)
+                q = nearest_on_outline(np.asarray(objects[oid].footprint), p[None])[0][0]
+                want = np.arctan2(q[1] - p[1], q[0] - p[0])
+                miss = np.abs((crowd.yaw[k, settled] - want + np.pi) % (2 * np.pi) - np.pi)
+                out.append(float(np.degrees(np.median(miss))))
     return out

@@ -4,6 +4,7 @@ the real reference sequences."""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ from song.pipeline.crowd.realism import (
     read_edinburgh_tracks,
     read_obsmat,
     resample,
+    stop_facing,
     wall_clearances,
 )
 
@@ -102,3 +104,24 @@ def test_edinburgh_reader_parses_pixels_and_frames(tmp_path: Path) -> None:
     np.testing.assert_allclose(first.xy, np.array([[100, 200], [110, 200], [120, 200]]) * 0.0247)
     np.testing.assert_allclose(second.t, [5 / 9.0, 6 / 9.0])  # sorted by frame
     np.testing.assert_allclose(second.xy[0], [0.0, 40 * 0.0247])
+
+
+def test_stop_facing_measures_each_unbroken_stay() -> None:
+    # 6 s at its start facing the desk east of it (the first 2 s, a settling turn, facing away), 4 s walking,
+    # then 5 s standing beside the start again, facing away from the desk (held up): two stays, each measured
+    # after its settling
+    from tests.pipeline.crowd.test_simulate import intent
+
+    fps, frames = 30, 30 * 15
+    xy, yaw = np.zeros((1, frames, 2)), np.zeros((1, frames))
+    yaw[0, : 2 * fps] = np.pi  # the settling turn
+    walking = slice(6 * fps, 10 * fps)
+    xy[0, walking, 0] = np.linspace(0.0, 0.2, 4 * fps)  # out and back, to 0.2 m from the start
+    xy[0, 10 * fps :, 0] = 0.2
+    yaw[0, 10 * fps :] = np.pi  # facing away from the desk
+    speed = np.zeros((1, frames))
+    speed[0, walking] = 0.3
+    crowd = SimpleNamespace(ids=np.array([0]), xy=xy, yaw=yaw, speed=speed, fps=fps)
+    walker = intent(0, (0.0, 0.0), (9.0, 9.0)).model_copy(update={"start_object": "desk"})
+    desk = SimpleNamespace(footprint=[(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)])
+    np.testing.assert_allclose(stop_facing(crowd, [walker], {"desk": desk}), [0.0, 180.0], atol=1e-9)
