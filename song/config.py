@@ -86,7 +86,9 @@ class CrowdConfig(_Section):
     max_neighbors: int = Field(10, ge=1, description="ORCA neighbours considered per agent")
     time_horizon_s: float = Field(4.0, gt=0.0, description="ORCA agent time horizon (how early people deviate), s")
     time_horizon_obst_s: float = Field(1.0, gt=0.0, description="ORCA obstacle time horizon, s")
-    max_accel_mps2: float = Field(2.0, gt=0.0, description="acceleration clamp, m/s²")
+    max_accel_mps2: float = Field(
+        2.0, gt=0.0, description="acceleration limit, m/s²: of the speed, and sideways in a turn (docs/crowd.md)"
+    )
     max_duration_s: float = Field(120.0, gt=0.0, description="longest simulated scenario, s")
     stall_time_s: float = Field(2.0, gt=0.0, description="no progress for this long = stalled, s")
     start_jitter_m: float = Field(0.03, ge=0.0, le=0.2, description="start jitter breaking symmetry, m")

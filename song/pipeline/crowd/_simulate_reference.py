@@ -44,6 +44,17 @@ def preferred_velocities_reference(pos, cur, nxt, has_next, goal, speed, moving,
     return pref
 
 
+def accelerate_reference(vel: np.ndarray, wanted: np.ndarray, limit: float) -> np.ndarray:
+    """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.accelerate` (with complex numbers)."""
+    v, w = complex(*vel), complex(*wanted)
+    if abs(v) > limit and abs(w) > limit and abs(np.angle(w / v)) <= np.pi / 2:
+        turn = np.clip(np.angle(w / v), -limit / abs(v), limit / abs(v))
+        new = v / abs(v) * np.exp(1j * turn) * np.clip(abs(w), abs(v) - limit, abs(v) + limit)
+    else:
+        new = v + (w - v) * min(1.0, limit / max(abs(w - v), 1e-300))
+    return np.array([new.real, new.imag])
+
+
 def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes):
     """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.settle_moves` (numpy and navmesh calls).
 
@@ -51,9 +62,7 @@ def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, acce
     """
     full = np.zeros_like(vel)
     full[rows] = wanted
-    dv = full - vel
-    norm = np.hypot(dv[:, 0], dv[:, 1])[:, None]
-    new_vel = vel + np.where(norm > accel_limit, dv / np.maximum(norm, 1e-12) * accel_limit, dv)
+    new_vel = np.array([accelerate_reference(v, f, accel_limit) for v, f in zip(vel, full, strict=True)]).reshape(-1, 2)
     new_vel[~moving] = 0.0
     target = pos.copy()
     rows = np.flatnonzero(moving)

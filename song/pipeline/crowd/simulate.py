@@ -10,8 +10,10 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
 3. local avoidance among all pedestrians and the walls, through the avoidance seam
    (:mod:`song.pipeline.crowd.avoidance`; ``crowd.avoidance = "orca"``: ORCA against the navmesh grown
    back by r + 5 mm, i.e. the un-eroded free space, so a pedestrian on the mesh never overlaps a wall);
-4. acceleration clamp; moves constrained to the navmesh (sliding along its boundary); overlap
-   resolution passes (pairs pushed apart within each pedestrian's speed budget, again on the mesh);
+4. acceleration limit (``crowd.max_accel_mps2``: a turn of up to 90° keeps the speed, with the heading
+   turning at that sideways acceleration; starting, stopping and turning back clamp the velocity change);
+   moves constrained to the navmesh (sliding along its boundary); overlap resolution passes (pairs
+   pushed apart within each pedestrian's speed budget, again on the mesh);
 5. stall detection: no progress along the path for ``stall_time_s`` → a full replan around everyone
    standing (Detour's temporary obstacles); stalled again → the pedestrian yields: it steps out of the
    way of the walkers around it (to a free spot 0.7 or 1.4 m away, the one farthest from their ways),
@@ -76,7 +78,7 @@ PROGRESS_M = 0.1  # a pedestrian that gets no closer than this along its path in
 FACE_TURN_RATE = np.pi / 2
 ASIDE_M, ASIDE_DIRECTIONS = 0.7, 12  # how far, and among how many directions, someone steps aside
 ASIDE_SCAN_M = 4.0  # a yielding walker steps out of the ways of the walkers this close
-OVERLAP_PASSES = 3
+OVERLAP_PASSES = 5  # at most; three left a 1 cm overlap in a social-force crowd pressing three abreast (docs/crowd.md)
 OVERLAP_MARGIN_M = 0.002  # overlap passes separate centres to 2r + this
 SEPARATION_REACH_M = 0.15  # beyond 2r + this (two frames' steps at 1.8 m/s, and more) no overlap pass joins two people
 # a replan keeps this much more than body contact from everyone standing: a path squeezed past someone at

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from song.config import SongConfig
 from song.datasets.run.intents import Intent, Provenance
@@ -152,3 +153,39 @@ def test_empty_and_single_crowds(make_scene) -> None:
     plan, mesh = _run(make_scene, one)
     check_crowd(plan, mesh, one)
     assert plan.status[7]["status"] == "arrived"
+
+
+def _turn(v, wanted, frames: int) -> tuple[np.ndarray, list[float]]:
+    """The velocity after ``frames`` frames of :func:`accelerate` toward ``wanted``, and its speed each frame."""
+    from song.pipeline.crowd._crowd_kernel import accelerate
+
+    limit, speeds = CFG.max_accel_mps2 / CFG.fps, []
+    for _ in range(frames):
+        v = accelerate(*v, *wanted, limit)
+        speeds.append(float(np.hypot(*v)))
+    return np.array(v), speeds
+
+
+def test_a_walker_keeps_its_speed_through_a_swerve_and_stops_to_turn_back() -> None:
+    limit = CFG.max_accel_mps2 / CFG.fps
+    swerve = 1.3 * np.array([np.cos(np.pi / 4), np.sin(np.pi / 4)])
+    v, speeds = _turn((1.3, 0.0), swerve, 15)  # 45° at 2 m/s² sideways: 0.051 rad a frame, 15.3 frames
+    assert min(speeds) == pytest.approx(1.3, abs=1e-12)  # a clamp on the vector change dips to 1.20 m/s
+    assert 0.0 < np.arctan2(v[1], v[0]) < np.pi / 4
+    v, _ = _turn(v, swerve, 3)
+    np.testing.assert_allclose(v, swerve, atol=1e-12)
+    back, speeds = _turn((1.3, 0.0), (-1.3, 0.0), 60)  # turning back: slow down, then walk the other way
+    assert min(speeds) <= limit and np.allclose(back, (-1.3, 0.0))
+    v, _ = _turn((0.0, 0.0), (0.0, 1.3), 3)  # setting off: the plain clamp
+    np.testing.assert_allclose(v, (0.0, 3 * limit), atol=1e-12)
+
+
+def test_compiled_acceleration_equals_its_reference_twin() -> None:
+    from song.pipeline.crowd._crowd_kernel import accelerate
+    from song.pipeline.crowd._simulate_reference import accelerate_reference
+
+    rng = np.random.default_rng(5)
+    for _ in range(3000):
+        v, w = (rng.normal(0, 1, 2) * rng.choice([0.01, 0.1, 1.0]) for _ in range(2))
+        limit = rng.choice([2 / 30, 0.5])
+        np.testing.assert_allclose(accelerate(*v, *w, limit), accelerate_reference(v, w, limit), atol=1e-12)
