@@ -135,7 +135,8 @@ def read_crowd(path: str | Path) -> CrowdTracks:
 class PedestrianStatus(BaseModel):
     """Outcome of one pedestrian in the crowd stage.
 
-    ``arrived``: at the last stop of its routine; ``gave_up``: stalled for good on its last leg, it
+    ``arrived``: at the last stop of its routine (``arrival_s``: when it got there, even if it later
+    stepped aside to make room for a walker); ``gave_up``: stalled for good on its last leg, it
     stepped out of the way and stands there (its track is kept); ``timeout``: still under way when the
     simulation ended; ``removed``: it could not start (no track; ``reason`` says why).
     """

@@ -122,7 +122,7 @@ class _Walkers:
     has_next: np.ndarray  # (N,) bool: the current corner is not the goal
     rest: np.ndarray  # (N,) path length from the current corner to the goal, m
     arrived: np.ndarray  # (N,) bool
-    arrival: np.ndarray  # (N,) s or nan
+    arrival: np.ndarray  # (N,) s: when it finished its routine (nan: not yet)
     best: np.ndarray  # (N,) shortest remaining path length seen, m
     last_progress: np.ndarray  # (N,) s
     replanned: np.ndarray  # (N,) str: why the stall replan did not help ("" until one is used)
@@ -313,9 +313,20 @@ def _give_up(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: flo
         _stand(w, k, t)
 
 
+def _finish(w: _Walkers, k: int, t: float) -> None:
+    """Pedestrian k has finished at time t and stands.
+
+    Its first finish is its arrival: a step aside to make room for a walker afterwards keeps that time.
+    """
+    w.arrived[k] = True
+    if np.isnan(w.arrival[k]):
+        w.arrival[k] = t
+
+
 def _stand(w: _Walkers, k: int, t: float) -> None:
     """Pedestrian k has finished where it is at time t."""
-    w.arrived[k], w.arrival[k], w.goal[k], w.vel[k] = True, t, w.pos[k].copy(), 0.0
+    _finish(w, k, t)
+    w.goal[k], w.vel[k] = w.pos[k].copy(), 0.0
 
 
 def _step_aside(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: float, t: float) -> bool:
@@ -421,8 +432,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, cf
         aside = w.stops[k][w.leg[k]][2]
         w.face[k] = _nearest_on_outline(w.stops[k][w.leg[k]][3], w.pos[k])
         if not _next_leg(w, mesh, int(k), t):
-            w.arrived[k] = True  # it stands where it is (no snap: a snap would exceed its speed)
-            w.arrival[k] = t
+            _finish(w, int(k), t)  # it stands where it is (no snap: a snap would exceed its speed)
         elif aside:
             _reroute_around_standing(w, mesh, int(k), moving, radius)
     for k in stalled:
@@ -430,8 +440,7 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, cf
             w.goal[k] = w.pos[k].copy()
             w.face[k] = _nearest_on_outline(w.stops[k][w.leg[k]][3], w.pos[k])
             if not _next_leg(w, mesh, int(k), t):
-                w.arrived[k] = True
-                w.arrival[k] = t
+                _finish(w, int(k), t)
             continue
         if w.stops[k][w.leg[k]][2]:  # the crowd keeps it from its spot aside: it waits where it got to
             if not _next_leg(w, mesh, int(k), t) and not np.isnan(w.gave_up[k]):
@@ -498,7 +507,7 @@ def _make_room(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: f
         w.stops[j].append((spot, 0.0, True, None))
         w.leg[j] = len(w.stops[j]) - 1
         w.goal[j] = spot
-        w.arrived[j], w.arrival[j] = False, np.nan
+        w.arrived[j] = False  # walking again; it keeps its arrival
         path_j = _plan(mesh, w.pos[j], spot)
         _set_path(w, j, path_j if path_j is not None else spot[None].copy())
         w.best[j] = _remaining(w, np.array([j]))[0]
@@ -610,7 +619,7 @@ def _outcome(w: _Walkers, k: int, cfg: CrowdConfig, shift: float) -> dict:
             f"{w.gave_up[k] - shift:.1f} s; it stepped out of the way and stands there"
         )
         return {"status": "gave_up", "reason": reason, "arrival_s": None, "skipped_stops": w.skipped[k]}
-    if w.arrived[k]:
+    if not np.isnan(w.arrival[k]):  # it finished its routine (it may be stepping aside for someone now)
         return {"status": "arrived", "reason": "", "arrival_s": round(float(w.arrival[k]) - shift, 4),
                 "skipped_stops": w.skipped[k]}  # fmt: skip
     reason = f"did not arrive within {cfg.max_duration_s - shift:g} s"
