@@ -443,8 +443,8 @@ def _check_progress(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, cf
                 _finish(w, int(k), t)
             continue
         if w.stops[k][w.leg[k]][2]:  # the crowd keeps it from its spot aside: it waits where it got to
-            if not _next_leg(w, mesh, int(k), t) and not np.isnan(w.gave_up[k]):
-                _stand(w, int(k), t)  # it gave its routine up: it stays where it got to
+            if not _next_leg(w, mesh, int(k), t):
+                _stand(w, int(k), t)  # a last spot aside (it has finished, or given up): it stays there
                 continue
             _reroute_around_standing(w, mesh, int(k), moving, radius)
             continue
