@@ -126,12 +126,13 @@ def accelerate(vx, vy, wx, wy, limit):  # pragma: no cover
     one to 0.92 m/s; docs/crowd.md.)
     """
     s0, s1 = np.hypot(vx, vy), np.hypot(wx, wy)
-    heading = np.arctan2(vy, vx)
-    rest = (np.arctan2(wy, wx) - heading + np.pi) % (2.0 * np.pi) - np.pi  # the turn wanted, in [-pi, pi)
-    if s0 > limit and s1 > limit and abs(rest) <= 0.5 * np.pi:
-        turn = min(max(rest, -limit / s0), limit / s0)
-        s = min(max(s1, s0 - limit), s0 + limit)
-        return s * np.cos(heading + turn), s * np.sin(heading + turn)
+    if s0 > limit and s1 > limit:  # under way, and staying so
+        heading = np.arctan2(vy, vx)
+        rest = (np.arctan2(wy, wx) - heading + np.pi) % (2.0 * np.pi) - np.pi  # the turn wanted, in [-pi, pi)
+        if abs(rest) <= 0.5 * np.pi:
+            turn = min(max(rest, -limit / s0), limit / s0)
+            s = min(max(s1, s0 - limit), s0 + limit)
+            return s * np.cos(heading + turn), s * np.sin(heading + turn)
     dvx, dvy = wx - vx, wy - vy
     norm = np.hypot(dvx, dvy)
     if norm > limit:
