@@ -1,7 +1,7 @@
 """SONG's crowds against real pedestrians: the statistics of song.pipeline.crowd.realism, one method for both.
 
     .venv/bin/python benchmarks/crowd_realism.py [--generated 30] [--avoidance orca social_force]
-        [--speed-profile paper human] [--markdown]
+        [--speed-profile paper human] [--seeds 1] [--markdown]
 
 Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 ProcTHOR houses) and
 ``--generated`` more procedural scenes, for every avoidance model × speed profile asked for, and
@@ -17,6 +17,11 @@ between the body and the nearest wall or furniture over moving samples (median, 
 area (the scene's navmesh; median over scenes) beside the density on the floor people covered (the
 one measure the real recordings allow), and the crowd stage's median seconds per scene. Prints JSON
 (and a markdown table with ``--markdown``).
+
+The crowd is chaotic: a change that helps one seed can hurt the next. ``--seeds 1 2 … 12`` runs every
+configuration once per run seed (``SongConfig.seed``; the scenes stay the same) and adds ``targets``:
+per configuration and target of issue 25, in how many seeds it is met, with the figure's minimum,
+median and maximum over the seeds.
 """
 
 from __future__ import annotations
@@ -83,9 +88,60 @@ def _wall_stats(gaps: np.ndarray) -> dict:
     }
 
 
-def run_config(scenes: Path, avoidance: str, profile: str, work: Path) -> dict:
-    config = SongConfig(seed=1, crowd={"avoidance": avoidance}, intents={"speed_profile": profile})
-    run = work / f"{avoidance}-{profile}"
+# issue 25's targets: name → (the figure in a configuration's statistics, whether it is met, profiles it binds)
+TARGETS = {
+    "head-on p25 >= 0.9 m": (lambda s: s["passes"]["head_on"]["p25"], lambda v: v >= 0.9, ("paper", "human")),
+    "head-on < 0.6 m <= 8 %": (lambda s: s["passes"]["head_on"]["below_0.6"], lambda v: v <= 0.08, ("paper", "human")),
+    "crossing < 0.5 m <= 2 %": (
+        lambda s: s["passes"]["crossing"]["below_0.5"],
+        lambda v: v <= 0.02,
+        ("paper", "human"),
+    ),
+    "pairs < 2 m passing < 0.6 m <= 20 %": (
+        lambda s: s["passes"]["all"]["below_0.6"],
+        lambda v: v <= 0.2,
+        ("paper", "human"),
+    ),
+    "speed median 1.1-1.5 m/s": (lambda s: s["speed_median_mps"], lambda v: 1.1 <= v <= 1.5, ("human",)),
+    "closest at any frame >= 2r - 1 cm": (
+        lambda s: s["closest_any_frame_m"] - s["contact_limit_m"],
+        lambda v: v >= 0.0,
+        ("paper", "human"),
+    ),
+    "last stop reached >= 95 %": (lambda s: s["arrived_share"], lambda v: v >= 0.95, ("paper", "human")),
+    "samples' walking share >= 0.5 every second 5-55 s": (
+        lambda s: s["walking_share_samples_5_55_min"],
+        lambda v: v >= 0.5,
+        ("paper", "human"),
+    ),
+    "crowd stage <= 0.5 s median per scene": (
+        lambda s: s["crowd_s_median_per_scene"],
+        lambda v: v <= 0.5,
+        ("paper", "human"),
+    ),
+}
+
+
+def target_summary(runs: list[dict], profile: str) -> dict:
+    """Per target binding ``profile``: in how many of ``runs`` (one per seed) it is met; the figure's range."""
+    out = {}
+    for name, (figure, met, profiles) in TARGETS.items():
+        if profile not in profiles:
+            continue
+        values = [figure(run) for run in runs]
+        out[name] = {
+            "met": sum(bool(met(v)) for v in values),
+            "of": len(values),
+            "min": round(float(np.min(values)), 4),
+            "median": round(float(np.median(values)), 4),
+            "max": round(float(np.max(values)), 4),
+        }
+    return out
+
+
+def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int = 1) -> dict:
+    config = SongConfig(seed=seed, crowd={"avoidance": avoidance}, intents={"speed_profile": profile})
+    run = work / f"{avoidance}-{profile}-{seed}"
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
     tracks, closest, shares, sample_shares, statuses, facing, walls = [], np.inf, [], [], [], [], []
@@ -166,15 +222,25 @@ def markdown(rows: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def targets_markdown(targets: dict[str, dict]) -> str:
+    lines = ["| configuration | target | met in seeds | min / median / max |", "|---|---|---|---|"]
+    for config, rows in targets.items():
+        for name, t in rows.items():
+            lines.append(f"| {config} | {name} | {t['met']} of {t['of']} | {t['min']} / {t['median']} / {t['max']} |")
+    return "\n".join(lines) + "\n"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--generated", type=int, default=30)
     parser.add_argument("--avoidance", nargs="+", default=["orca", "social_force"])
     parser.add_argument("--speed-profile", nargs="+", default=["paper", "human"])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1], help="run seeds (SongConfig.seed)")
     parser.add_argument("--markdown", action="store_true")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="song-crowd-realism-"))
     rows: dict[str, dict] = {}
+    targets: dict[str, dict] = {}
     try:
         scenes = work / "scenes"
         shutil.copytree(SAMPLES, scenes, ignore=shutil.ignore_patterns("*.md", "*.txt"))
@@ -184,10 +250,15 @@ def main() -> None:
                 generate_scene(f"gen_{venue}_{k:04d}", venue, 1234, scenes, splat=False)
         for avoidance in args.avoidance:
             for profile in args.speed_profile:
-                start = time.perf_counter()
-                stats = run_config(scenes, avoidance, profile, work)
-                stats["wall_s"] = round(time.perf_counter() - start, 1)
-                rows[f"SONG {avoidance} / {profile}"] = stats
+                runs = []
+                for seed in args.seeds:
+                    start = time.perf_counter()
+                    stats = run_config(scenes, avoidance, profile, work, seed)
+                    stats["wall_s"] = round(time.perf_counter() - start, 1)
+                    name = f"SONG {avoidance} / {profile}" + (f" / seed {seed}" if len(args.seeds) > 1 else "")
+                    rows[name] = stats
+                    runs.append(stats)
+                targets[f"SONG {avoidance} / {profile}"] = target_summary(runs, profile)
         for name in ("eth", "hotel"):
             path = REAL / f"ewap_seq_{name}_obsmat.txt"
             rows[f"real {name.upper()}"] = (
@@ -199,9 +270,10 @@ def main() -> None:
         )
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    emit(rows)
+    emit({**rows, "targets": targets})
     if args.markdown:
         print(markdown({k: v for k, v in rows.items() if "skipped" not in v}))  # noqa: T201
+        print(targets_markdown(targets))  # noqa: T201
 
 
 if __name__ == "__main__":
