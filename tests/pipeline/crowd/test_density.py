@@ -62,6 +62,22 @@ def test_a_walker_stalled_for_good_on_its_last_leg_gives_up_and_stands_out_of_th
     assert t[-1] < CFG.max_duration_s  # and it stands there: the run ends once everyone has finished
 
 
+def test_someone_dwelling_in_a_doorway_cuts_the_dwell_short_for_a_walker_it_blocks(make_scene) -> None:
+    # 0 stops in the 1.0 m door for a minute, then goes back into room A; 1 comes from room B through
+    # that door. With no way round, 1's stall makes room: 0 leaves for its next leg early.
+    stop = Leg(activity="wait", goal_object="door", goal_xy=(4.0, 2.0), dwell_s=60.0)
+    back = Leg(activity="walk", goal_object="corner", goal_xy=(1.2, 3.0))
+    dweller = intent(0, (1.0, 2.0), (4.0, 2.0), 0.9).model_copy(update={"legs": [stop, back]})
+    walker = intent(1, (7.0, 2.0), (2.5, 1.6), 0.9, depart=8.0)
+    plan, mesh = _plan(make_scene, [dweller, walker], 1.0)
+    check_crowd(plan, mesh, [dweller, walker])
+    assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
+    assert not plan.status[0]["skipped_stops"]  # it did stop at the door
+    at_door = np.linalg.norm(plan.xy[list(plan.ped_ids).index(0)] - np.array([4.0, 2.0]), axis=-1) < 0.1
+    assert 1.0 <= at_door.sum() / plan.fps < 30.0  # ... but not for its minute
+    assert plan.status[1]["arrival_s"] < 40.0
+
+
 def test_compiled_pair_loops_equal_their_reference_twins() -> None:
     rng = np.random.default_rng(7)
     for n in (1, 2, 9, 40):

@@ -149,6 +149,18 @@ def test_pedestrian_standing_in_a_door_steps_aside(make_scene) -> None:
     assert plan.status[0]["arrival_s"] == pytest.approx(reached, abs=1.5 / plan.fps)
 
 
+def test_a_walker_still_under_way_when_the_scenario_ends_times_out(make_scene) -> None:
+    intents = [intent(0, (1.5, 2.0), (6.5, 2.0), 0.9), intent(1, (2.0, 3.2), (2.5, 3.2), 0.9)]
+    cfg = CFG.model_copy(update={"max_duration_s": 4.0})
+    mesh = scene_navmesh(load_scene_package(make_scene()), R, CFG.contour_error_m)
+    plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "tiny", "crowd"))
+    assert plan.status[1]["status"] == "arrived"
+    assert plan.status[0] == {
+        "status": "timeout", "reason": "did not arrive within 4 s", "arrival_s": None, "skipped_stops": []
+    }  # fmt: skip
+    assert (plan.xy.shape[1] - 1) / plan.fps == pytest.approx(4.0, abs=1 / plan.fps)  # cut at the limit
+
+
 def test_empty_and_single_crowds(make_scene) -> None:
     plan, _ = _run(make_scene, [])
     assert plan.xy.shape[0] == 0 and plan.status == {}
