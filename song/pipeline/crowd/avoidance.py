@@ -101,7 +101,7 @@ class WallDistance:
     cell its distance to the mesh boundary; adding the agent radius gives the distance to the wall.
     One value per cell: within a cell the answer can exceed the true distance. On the sample scenes,
     over random mesh points within 0.35 m of the boundary, it exceeds it by up to 8–10 cm, and by more
-    than 5 mm at about 40 % of them. So the wall comfort's cap (``wall − ROOM_MARGIN_M``) can hold a
+    than 5 mm at 36–52 % of them. So the wall comfort's cap (``wall − ROOM_MARGIN_M``) can hold a
     walker a few centimetres off a wall. An exact query was tried and not kept (docs/crowd.md, walls).
     """
 
