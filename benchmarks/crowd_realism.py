@@ -103,7 +103,7 @@ TARGETS = {
         ("paper", "human"),
     ),
     "speed median 1.1-1.5 m/s": (lambda s: s["speed_median_mps"], lambda v: 1.1 <= v <= 1.5, ("human",)),
-    "closest at any frame >= 2r - 1 cm": (
+    "closest at any frame minus (2r - 1 cm) >= 0 m": (
         lambda s: s["closest_any_frame_m"] - s["contact_limit_m"],
         lambda v: v >= 0.0,
         ("paper", "human"),
@@ -128,15 +128,25 @@ def target_summary(runs: list[dict], profile: str) -> dict:
     for name, (figure, met, profiles) in TARGETS.items():
         if profile not in profiles:
             continue
-        values = [figure(run) for run in runs]
-        out[name] = {
-            "met": sum(bool(met(v)) for v in values),
-            "of": len(values),
-            "min": round(float(np.min(values)), 4),
-            "median": round(float(np.median(values)), 4),
-            "max": round(float(np.max(values)), 4),
-        }
+        values = [v for v in map(_figure_or_none(figure), runs) if v is not None]  # a run may lack it
+        spread = {k: round(float(f(values)), 4) if values else None for k, f in SPREAD.items()}
+        out[name] = {"met": sum(bool(met(v)) for v in values), "of": len(runs), **spread}
     return out
+
+
+SPREAD = {"min": np.min, "median": np.median, "max": np.max}
+
+
+def _figure_or_none(figure):
+    """``figure`` returning None where a run has no such figure (no head-on pass, no scene planned)."""
+
+    def get(run: dict):
+        try:
+            return figure(run)
+        except (KeyError, TypeError):
+            return None
+
+    return get
 
 
 def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int = 1) -> dict:
