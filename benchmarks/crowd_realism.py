@@ -1,7 +1,7 @@
 """SONG's crowds against real pedestrians: the statistics of song.pipeline.crowd.realism, one method for both.
 
     .venv/bin/python benchmarks/crowd_realism.py [--generated 30] [--avoidance orca social_force]
-        [--speed-profile paper human] [--seeds 1] [--markdown]
+        [--speed-profile paper human] [--seeds 1] [--set SECTION.KEY=VALUE ...] [--markdown]
 
 Runs the intents and crowd stages on the sample scenes (8 procedural venues + 3 ProcTHOR houses) and
 ``--generated`` more procedural scenes, for every avoidance model × speed profile asked for, and
@@ -21,7 +21,8 @@ one measure the real recordings allow), and the crowd stage's median seconds per
 The crowd is chaotic: a change that helps one seed can hurt the next. ``--seeds 1 2 … 12`` runs every
 configuration once per run seed (``SongConfig.seed``; the scenes stay the same) and adds ``targets``:
 per configuration and target of issue 25, in how many seeds it is met, with the figure's minimum,
-median and maximum over the seeds.
+median and maximum over the seeds. ``--set crowd.comfort_distance_m=1.05`` (repeatable, as ``song
+--set``) runs every configuration with that setting, to measure a parameter beside the defaults.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import ROOT, crowd_outcomes, emit  # noqa: E402
 
-from song.config import SongConfig  # noqa: E402
+from song.config import SongConfig, parse_assignments  # noqa: E402
 from song.datasets.run import read_crowd, read_intents  # noqa: E402
 from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.datasets.scenes.generate import VENUE_ORDER, generate_scene  # noqa: E402
@@ -149,8 +150,14 @@ def _figure_or_none(figure):
     return get
 
 
-def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int = 1) -> dict:
-    config = SongConfig(seed=seed, crowd={"avoidance": avoidance}, intents={"speed_profile": profile})
+def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int = 1, sets: dict | None = None) -> dict:
+    sets = sets or {}
+    config = SongConfig(
+        **{k: v for k, v in sets.items() if k not in ("seed", "crowd", "intents")},
+        seed=seed,
+        crowd={**sets.get("crowd", {}), "avoidance": avoidance},
+        intents={**sets.get("intents", {}), "speed_profile": profile},
+    )
     run = work / f"{avoidance}-{profile}-{seed}"
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
@@ -246,8 +253,12 @@ def main() -> None:
     parser.add_argument("--avoidance", nargs="+", default=["orca", "social_force"])
     parser.add_argument("--speed-profile", nargs="+", default=["paper", "human"])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1], help="run seeds (SongConfig.seed)")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="config override (as `song --set`)"
+    )
     parser.add_argument("--markdown", action="store_true")
     args = parser.parse_args()
+    sets = parse_assignments(args.set)
     work = Path(tempfile.mkdtemp(prefix="song-crowd-realism-"))
     rows: dict[str, dict] = {}
     targets: dict[str, dict] = {}
@@ -263,7 +274,7 @@ def main() -> None:
                 runs = []
                 for seed in args.seeds:
                     start = time.perf_counter()
-                    stats = run_config(scenes, avoidance, profile, work, seed)
+                    stats = run_config(scenes, avoidance, profile, work, seed, sets)
                     stats["wall_s"] = round(time.perf_counter() - start, 1)
                     name = f"SONG {avoidance} / {profile}" + (f" / seed {seed}" if len(args.seeds) > 1 else "")
                     rows[name] = stats
