@@ -123,31 +123,30 @@ TARGETS = {
 }
 
 
+SPREAD = {"min": np.min, "median": np.median, "max": np.max}
+
+
 def target_summary(runs: list[dict], profile: str) -> dict:
-    """Per target binding ``profile``: in how many of ``runs`` (one per seed) it is met; the figure's range."""
+    """Per target binding ``profile``: in how many of ``runs`` (one per seed) it is met; the figure's range.
+
+    A run without the figure (no head-on pass, no scene planned) counts as not meeting the target.
+    """
     out = {}
     for name, (figure, met, profiles) in TARGETS.items():
         if profile not in profiles:
             continue
-        values = [v for v in map(_figure_or_none(figure), runs) if v is not None]  # a run may lack it
+        values = [v for v in (_figure(figure, run) for run in runs) if v is not None]
         spread = {k: round(float(f(values)), 4) if values else None for k, f in SPREAD.items()}
         out[name] = {"met": sum(bool(met(v)) for v in values), "of": len(runs), **spread}
     return out
 
 
-SPREAD = {"min": np.min, "median": np.median, "max": np.max}
-
-
-def _figure_or_none(figure):
-    """``figure`` returning None where a run has no such figure (no head-on pass, no scene planned)."""
-
-    def get(run: dict):
-        try:
-            return figure(run)
-        except (KeyError, TypeError):
-            return None
-
-    return get
+def _figure(figure, run: dict):
+    """``figure(run)``, or None where the run has no such figure."""
+    try:
+        return figure(run)
+    except (KeyError, TypeError):
+        return None
 
 
 def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int = 1, sets: dict | None = None) -> dict:
