@@ -84,7 +84,12 @@ class CrowdConfig(_Section):
     )
     neighbor_dist_m: float = Field(5.0, gt=0.0, description="ORCA neighbour search distance, m")
     max_neighbors: int = Field(10, ge=1, description="ORCA neighbours considered per agent")
-    time_horizon_s: float = Field(4.0, gt=0.0, description="ORCA agent time horizon (how early people deviate), s")
+    time_horizon_s: float = Field(
+        2.0, gt=0.0, description="ORCA agent time horizon: collisions of personal space kept out this long, s"
+    )
+    anticipation_s: float = Field(
+        4.0, gt=0.0, description="how far ahead walkers predict passes and start to swerve, s (docs/crowd.md)"
+    )
     time_horizon_obst_s: float = Field(1.0, gt=0.0, description="ORCA obstacle time horizon, s")
     max_accel_mps2: float = Field(
         2.0, gt=0.0, description="acceleration limit, m/s²: of the speed, and sideways in a turn (docs/crowd.md)"

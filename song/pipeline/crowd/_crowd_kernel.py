@@ -141,22 +141,43 @@ def accelerate(vx, vy, wx, wy, limit):  # pragma: no cover
 
 
 @numba.njit(cache=True, nogil=True)
+def _move(px, py, qx, qy, limit, stamp, tick, mesh):  # pragma: no cover
+    """One step p→q kept on the mesh (sliding along walls) and no longer than ``limit``: ``(x, y, tick)``.
+
+    Sliding along a non-convex wall can lengthen a step a little: it is shortened back along its
+    direction, or cancelled when the shortened one would leave the mesh.
+    """
+    va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid, tstart, titems = mesh
+    tick += 1
+    x, y = _constrain(px, py, qx, qy, stamp, tick, va, vb, verts, tris, seg_tri, hgrid, hstart, hitems)
+    size = np.hypot(x - px, y - py)
+    if not size > limit * (1 + 1e-9):  # rounding alone is not a violation
+        return x, y, tick
+    sx, sy = px + (x - px) * limit / size, py + (y - py) * limit / size
+    tick += 1
+    clear = _nk._ray_clear(px, py, sx, sy, va, vb, verts, hgrid, hstart, hitems, stamp, tick)
+    if clear and _on_mesh(sx, sy, 1e-9, va, vb, verts, tris, tgrid, tstart, titems):  # may end on an edge
+        return sx, sy, tick
+    return px, py, tick
+
+
+@numba.njit(cache=True, nogil=True)
 def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, mesh):  # pragma: no cover
     """The frame's moves from the avoidance model's velocities: ``(new positions (N, 2), velocities (N, 2))``.
 
     ``wanted`` (M, 2) are the new velocities of pedestrians ``rows`` (M,); the others' are 0.
 
-    In order: the acceleration limit (:func:`accelerate`); moves kept on the mesh (sliding along walls);
-    up to ``passes`` overlap resolution passes (:func:`overlap_push` within each walker's speed budget,
-    again on the mesh); a step that sliding lengthened beyond the speed limit shortened back (or
-    cancelled when the shortened one would leave the mesh). Non-walkers stay put. ``mesh`` is the navmesh kernel tuple
-    ``(va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid, tstart, titems)``.
-    One compiled call per frame: as numpy and navmesh calls these were ~20 dispatches a frame. The
-    reference twin is :func:`song.pipeline.crowd._simulate_reference.settle_moves_reference`.
+    In order: the acceleration limit (:func:`accelerate`); moves kept on the mesh and within the speed
+    limit (:func:`_move`); up to ``passes`` overlap resolution passes (:func:`overlap_push` within each
+    walker's speed budget, again through :func:`_move`). Each move is final when the passes see it (until
+    the seventeenth session a step that sliding lengthened was shortened, or cancelled, after the passes,
+    which could leave a follower pressed 1 cm into a walker stopped that way). Non-walkers stay put.
+    ``mesh`` is the navmesh kernel tuple ``(va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid,
+    tstart, titems)``. One compiled call per frame: as numpy and navmesh calls these were ~20 dispatches
+    a frame. The reference twin is :func:`song.pipeline.crowd._simulate_reference.settle_moves_reference`.
     """
-    va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid, tstart, titems = mesh
     n = len(pos)
-    stamp = np.zeros(len(va), dtype=np.int64)
+    stamp = np.zeros(len(mesh[0]), dtype=np.int64)
     tick = 0
     target = pos.copy()
     full = np.zeros((n, 2))
@@ -166,9 +187,8 @@ def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dis
         if not moving[i]:
             continue
         vx, vy = accelerate(vel[i, 0], vel[i, 1], full[i, 0], full[i, 1], accel_limit)
-        tick += 1
-        target[i, 0], target[i, 1] = _constrain(pos[i, 0], pos[i, 1], pos[i, 0] + vx * dt, pos[i, 1] + vy * dt, stamp,
-                                                tick, va, vb, verts, tris, seg_tri, hgrid, hstart, hitems)  # fmt: skip
+        target[i, 0], target[i, 1], tick = _move(pos[i, 0], pos[i, 1], pos[i, 0] + vx * dt, pos[i, 1] + vy * dt,
+                                                 speed[i] * dt, stamp, tick, mesh)  # fmt: skip
     for _ in range(passes):
         push, found = overlap_push(target, moving, min_dist)
         if not found:
@@ -178,23 +198,8 @@ def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dis
                 continue
             sx, sy = target[i, 0] + push[i, 0] - pos[i, 0], target[i, 1] + push[i, 1] - pos[i, 1]
             scale = min(1.0, speed[i] * dt / max(np.hypot(sx, sy), 1e-12))
-            tick += 1
-            target[i, 0], target[i, 1] = _constrain(pos[i, 0], pos[i, 1], pos[i, 0] + sx * scale,
-                                                    pos[i, 1] + sy * scale, stamp, tick, va, vb, verts, tris,
-                                                    seg_tri, hgrid, hstart, hitems)  # fmt: skip
-    for i in range(n):  # sliding along a non-convex wall can lengthen a step a little
-        dx, dy = target[i, 0] - pos[i, 0], target[i, 1] - pos[i, 1]
-        size = np.hypot(dx, dy)
-        if not size > speed[i] * dt * (1 + 1e-9):  # rounding alone is not a violation
-            continue
-        f = speed[i] * dt / size
-        x, y = pos[i, 0] + dx * f, pos[i, 1] + dy * f
-        tick += 1
-        clear = _nk._ray_clear(pos[i, 0], pos[i, 1], x, y, va, vb, verts, hgrid, hstart, hitems, stamp, tick)
-        if clear and _on_mesh(x, y, 1e-9, va, vb, verts, tris, tgrid, tstart, titems):  # may end on an edge
-            target[i, 0], target[i, 1] = x, y
-        else:
-            target[i, 0], target[i, 1] = pos[i, 0], pos[i, 1]
+            x, y = pos[i, 0] + sx * scale, pos[i, 1] + sy * scale
+            target[i, 0], target[i, 1], tick = _move(pos[i, 0], pos[i, 1], x, y, speed[i] * dt, stamp, tick, mesh)
     new_vel = (target - pos) / dt
     return target, new_vel
 

@@ -424,6 +424,27 @@ def _lp3(lines, n, n_obst, begin, radius, rx, ry, proj):
 
 
 @_jit
+def _keep_pace(lines, n, rx, ry, ox, oy, top):
+    """ORCA's velocity (rx, ry) lengthened along its direction toward the preferred speed ``|(ox, oy)|``.
+
+    Only for a velocity that still goes forward (within 90° of the preferred one) and is slower than
+    preferred: the largest multiple, up to the preferred speed (and ``top``, the speed limit), that
+    every line still allows. The lines are half-planes, so the allowed multiples form an interval
+    holding 1; each line whose side the ray leaves caps it at ``det(d, p) / det(d, r)``.
+    """
+    want, have = min(math.sqrt(ox * ox + oy * oy), top), math.sqrt(rx * rx + ry * ry)
+    if have <= EPS or have >= want or rx * ox + ry * oy <= 0.0:
+        return rx, ry
+    scale = want / have
+    for i in range(n):
+        slope = _det(lines[i, 2], lines[i, 3], rx, ry)
+        if slope < 0.0:
+            scale = min(scale, _det(lines[i, 2], lines[i, 3], lines[i, 0], lines[i, 1]) / slope)
+    scale = max(scale, 1.0)
+    return rx * scale, ry * scale
+
+
+@_jit
 def _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
                  neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, lines, work, grid):  # fmt: skip
     """Agent i's ORCA lines into ``lines`` (obstacle lines first); returns (count, obstacle-line count).
@@ -457,8 +478,11 @@ def _work(n_vertices, max_neighbors):
 
 @_jit
 def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-                neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full):  # fmt: skip
-    """New (N, 2) velocities: every agent's lines, then linearProgram2 (and 3 where 2 is infeasible)."""
+                neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, keep_pace):  # fmt: skip
+    """New (N, 2) velocities: every agent's lines, then linearProgram2 (and 3 where 2 is infeasible).
+
+    With ``keep_pace`` a feasible answer slower than preferred is then lengthened (:func:`_keep_pace`).
+    """
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     out = np.zeros((n_agents, 2))
     size = n_vertices + max_neighbors + 1
@@ -473,13 +497,15 @@ def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dir
         fail, rx, ry = _lp2(lines, n, speeds[i], pref[i, 0], pref[i, 1], False)
         if fail < n:
             rx, ry = _lp3(lines, n, n_obst, fail, speeds[i], rx, ry, proj)
+        elif keep_pace:
+            rx, ry = _keep_pace(lines, n, rx, ry, pref[i, 0], pref[i, 1], speeds[i])
         out[i, 0], out[i, 1] = rx, ry
     return out
 
 
 @_jit
 def lines_kernel(pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
-                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full):  # fmt: skip
+                 neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, keep_pace):  # fmt: skip
     """Every agent's ORCA lines: ``(lines (N, L, 4) [px, py, dx, dy], counts (N,), obstacle counts (N,))``."""
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     size = n_vertices + max_neighbors + 1

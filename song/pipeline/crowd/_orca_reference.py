@@ -308,6 +308,15 @@ def _lp3(lines: list[Line], n_obst: int, begin: int, radius: float, result: Vec)
     return result
 
 
+def _keep_pace(lines: list[Line], result: Vec, pref: Vec, top: float) -> Vec:
+    """Twin of the kernel's ``_keep_pace``: the LP answer lengthened toward the preferred speed, within the lines."""
+    want, have = min(math.hypot(*pref), top), math.hypot(*result)
+    if have <= EPS or have >= want or _dot(result, pref) <= 0.0:
+        return result
+    caps = [_det(d, p) / _det(d, result) for p, d in lines if _det(d, result) < 0.0]
+    return _mul(max(min([want / have, *caps]), 1.0), result)
+
+
 def orca_step_reference(
     positions,
     velocities,
@@ -338,5 +347,7 @@ def orca_step_reference(
         fail, result = _lp2(lines, speed, pref[i], False)
         if fail < len(lines):
             result = _lp3(lines, n_obst, fail, speed, result)
+        elif params.keep_pace:
+            result = _keep_pace(lines, result, pref[i], speed)
         out[i] = result
     return out

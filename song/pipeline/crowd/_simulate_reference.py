@@ -55,6 +55,19 @@ def accelerate_reference(vel: np.ndarray, wanted: np.ndarray, limit: float) -> n
     return np.array([new.real, new.imag])
 
 
+def _move_reference(mesh, pos: np.ndarray, target: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """Reference twin of :func:`song.pipeline.crowd._crowd_kernel._move` for many steps (numpy and navmesh calls)."""
+    target = mesh.constrain_moves(pos, target)
+    disp = target - pos
+    size = np.hypot(disp[:, 0], disp[:, 1])
+    over = np.flatnonzero(size > limit * (1 + 1e-9))
+    if len(over):
+        scaled = pos[over] + disp[over] * (limit[over] / size[over])[:, None]
+        ok = mesh.segment_clear(pos[over], scaled) & mesh.contains(scaled, tol=1e-9)
+        target[over] = np.where(ok[:, None], scaled, pos[over])
+    return target
+
+
 def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes):
     """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.settle_moves` (numpy and navmesh calls).
 
@@ -65,10 +78,10 @@ def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, acce
     new_vel = np.array([accelerate_reference(v, f, accel_limit) for v, f in zip(vel, full, strict=True)]).reshape(-1, 2)
     new_vel[~moving] = 0.0
     target = pos.copy()
+    max_step = speed * dt
     rows = np.flatnonzero(moving)
     if len(rows):
-        target[rows] = mesh.constrain_moves(pos[rows], pos[rows] + new_vel[rows] * dt)
-    max_step = speed * dt
+        target[rows] = _move_reference(mesh, pos[rows], pos[rows] + new_vel[rows] * dt, max_step[rows])
     for _ in range(passes):
         push, found = overlap_push_reference(target, moving, min_dist)
         if not found:
@@ -77,12 +90,5 @@ def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, acce
         step *= np.minimum(1.0, max_step[:, None] / np.maximum(np.hypot(step[:, 0], step[:, 1]), 1e-12)[:, None])
         rows = np.flatnonzero(moving & (np.abs(push).sum(axis=1) > 0))
         if len(rows):
-            target[rows] = mesh.constrain_moves(pos[rows], pos[rows] + step[rows])
-    disp = target - pos
-    size = np.hypot(disp[:, 0], disp[:, 1])
-    over = np.flatnonzero(size > speed * dt * (1 + 1e-9))
-    if len(over):
-        scaled = pos[over] + disp[over] * (speed[over] * dt / size[over])[:, None]
-        ok = mesh.segment_clear(pos[over], scaled) & mesh.contains(scaled, tol=1e-9)
-        target[over] = np.where(ok[:, None], scaled, pos[over])
+            target[rows] = _move_reference(mesh, pos[rows], pos[rows] + step[rows], max_step[rows])
     return target, (target - pos) / dt

@@ -21,8 +21,9 @@ is too narrow for it, or the crowd too dense.
   the body in a narrow one, when it is about to touch someone's, and as the walker is held up in a
   jam), the body radius for people standing, the body radius plus the wall comfort (within the room
   it has) against walls, and the whole avoidance -- not RVO2's half -- against someone standing
-  still. The time horizon (``crowd.time_horizon_s``, 4 s) is also how far ahead encounters are
-  anticipated.
+  still. ORCA keeps collisions of personal space out for ``crowd.time_horizon_s`` (2 s) and keeps
+  the walker's pace where the half-planes allow it (:attr:`song.pipeline.crowd.orca.OrcaParams.
+  keep_pace`); passes are anticipated ``crowd.anticipation_s`` (4 s) ahead.
 - ``social_force``: Helbing & Molnár's social-force model (Phys. Rev. E 51, 4282, 1995) with the
   pedestrian interaction of Moussaïd et al. (Proc. R. Soc. B 276, 2755, 2009; the anisotropic,
   velocity-dependent form fitted to controlled experiments) and an exponential wall repulsion:
@@ -319,7 +320,7 @@ def _orca_velocities(
     """ORCA's new velocities with personal space, as :meth:`OrcaAvoidance.velocities` documents.
 
     ``frame`` is the grids' ``(origin x, origin y, resolution)``; ``comfort`` is ``(comfort distance,
-    wall comfort, time horizon, obstacle time horizon)``; ``tail`` is :func:`song.pipeline.crowd.orca.
+    wall comfort, anticipation horizon, obstacle time horizon)``; ``tail`` is :func:`song.pipeline.crowd.orca.
     kernel_tail`. One compiled call per frame (as numpy calls the inputs alone were ~30 dispatches).
     """
     ox, oy, res = frame
@@ -368,6 +369,7 @@ class OrcaAvoidance:
             cfg.time_horizon_s,
             cfg.time_horizon_obst_s,
             static_full_responsibility=True,
+            keep_pace=True,
         )
         self.walls = orca_walls(mesh)
         self.wall_distance = WallDistance(mesh)
@@ -375,7 +377,7 @@ class OrcaAvoidance:
         p = self.wall_distance.params
         self._constants = (  # what the compiled step takes besides the pedestrians and the grids, built once
             (float(p.origin[0]), float(p.origin[1]), float(p.resolution)),
-            (self.comfort, self.wall_comfort, self.params.time_horizon, self.params.time_horizon_obst),
+            (self.comfort, self.wall_comfort, cfg.anticipation_s, self.params.time_horizon_obst),
             self.params.neighbor_dist,
             kernel_tail(self.walls, self.params),
         )

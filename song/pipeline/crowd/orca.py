@@ -44,6 +44,10 @@ class OrcaParams:
         time_horizon_obst: obstacle half-planes keep collisions out for this long, s.
         static_full_responsibility: an agent takes the whole avoidance against a neighbour whose speed
             limit is 0 (a standing person cannot take its half); RVO2 always splits it (False).
+        keep_pace: a feasible answer slower than the preferred velocity, still heading forward, is
+            lengthened along its own direction toward the preferred speed as far as every half-plane
+            allows (people keep their speed and turn rather than slow down when there is room); RVO2
+            returns the allowed velocity nearest the preferred one (False).
     """
 
     time_step: float
@@ -52,6 +56,7 @@ class OrcaParams:
     time_horizon: float
     time_horizon_obst: float
     static_full_responsibility: bool = False
+    keep_pace: bool = False
 
 
 @dataclass(frozen=True)
@@ -268,6 +273,7 @@ def kernel_tail(obstacles: ObstacleSet | None, params: OrcaParams) -> tuple:
         float(params.time_horizon_obst),
         float(params.time_step),
         bool(params.static_full_responsibility),
+        bool(params.keep_pace),
     )
     return (*_tree_args(obstacles), *scalars)
 

@@ -262,7 +262,8 @@ def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_
     """How far (deg) from its object each pedestrian faces while standing at it, one value per stay.
 
     A stay: at least ``min_stay_s`` standing without a break (< 0.01 m/s) within 0.5 m of an intent's
-    start or 0.3 m of a leg's goal (someone held up in a jam beside the spot later is not staying there);
+    start before it first moves, or within 0.3 m of a leg's goal (someone held up in a jam beside the
+    spot later, or stepping aside near its start, is not staying there);
     measured after its first ``settle_s`` (a turn on the spot) as the median |yaw − direction to the
     nearest point of the object's outline|.
 
@@ -280,10 +281,13 @@ def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_
         stays = [(intent.start_object, intent.start_xy, 0.5)] + [
             (g.goal_object, g.goal_xy, 0.3) for g in intent.route()
         ]
-        for oid, spot, near in stays:
+        moves = np.flatnonzero(crowd.speed[k] >= 0.01)
+        before_first_move = np.arange(crowd.xy.shape[1]) < (moves[0] if len(moves) else crowd.xy.shape[1])
+        for n, (oid, spot, near) in enumerate(stays):
             if oid not in objects:
                 continue
-            at = np.flatnonzero((np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & (crowd.speed[k] < 0.01))
+            standing = (crowd.speed[k] < 0.01) & (before_first_move if n == 0 else True)
+            at = np.flatnonzero((np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & standing)
             for frames in np.split(at, np.flatnonzero(np.diff(at) > 1) + 1):  # each unbroken stay
                 if len(frames) < min_stay_s * crowd.fps:
                     continue

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -149,3 +151,50 @@ def test_answer_is_in_the_disc_and_every_half_plane_when_feasible(crowd) -> None
         if fail == len(lines):  # feasible: the answer breaks no half-plane
             slack = [ref._det(d, (q[0] - out[i, 0], q[1] - out[i, 1])) for q, d in lines]
             assert max(slack, default=0.0) <= LINE_TOL
+
+
+PACED = dataclasses.replace(PARAMS, keep_pace=True)
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("n", [2, 40, 130])
+def test_keep_pace_matches_reference_twin(n: int, seed: int) -> None:
+    args = (*_agents(n, 300 + seed), build_obstacles(_room()), PACED)
+    np.testing.assert_allclose(orca_step(*args), ref.orca_step_reference(*args), rtol=0, atol=TWIN_TOL)
+
+
+@settings(max_examples=60, deadline=None)
+@given(_crowds())
+def test_keep_pace_lengthens_the_answer_within_every_half_plane(crowd) -> None:
+    """Kept pace: ORCA's direction, no slower than ORCA's answer, no faster than preferred, no half-plane broken."""
+    pos, vel, pref, radii, speeds, obstacles = crowd
+    plain = orca_step(pos, vel, pref, radii, speeds, obstacles, PARAMS)
+    paced = orca_step(pos, vel, pref, radii, speeds, obstacles, PACED)
+    for i in range(len(pos)):
+        p, v = tuple(pos[i]), tuple(vel[i])
+        lines = ref._obstacle_lines(p, v, radii[i], speeds[i], obstacles, PARAMS) if obstacles else []
+        for j in ref._agent_neighbours(i, [tuple(q) for q in pos], PARAMS):
+            lines.append(ref._agent_line(p, v, radii[i], tuple(pos[j]), tuple(vel[j]), radii[j], PARAMS))
+        fail, _ = ref._lp2(lines, speeds[i], tuple(pref[i]), False)
+        if fail < len(lines):  # infeasible: linearProgram3's answer stands
+            np.testing.assert_array_equal(paced[i], plain[i])
+            continue
+        slack = [ref._det(d, (q[0] - paced[i, 0], q[1] - paced[i, 1])) for q, d in lines]
+        assert max(slack, default=0.0) <= LINE_TOL
+        fast, slow = np.hypot(*paced[i]), np.hypot(*plain[i])
+        assert abs(plain[i, 0] * paced[i, 1] - plain[i, 1] * paced[i, 0]) <= 1e-9 * max(fast, 1.0)  # same direction
+        assert slow - 1e-12 <= fast <= max(slow, min(np.hypot(*pref[i]), speeds[i])) + 1e-9
+
+
+def test_keep_pace_passes_someone_standing_at_full_speed() -> None:
+    """A walker heading 0.3 m past someone standing 2 m ahead turns aside at its speed; RVO2's answer slows it."""
+    pos = np.array([[0.0, 0.0], [2.0, 0.3]])
+    pref = np.array([[1.3, 0.0], [0.0, 0.0]])
+    vel = pref.copy()
+    params = dataclasses.replace(PARAMS, static_full_responsibility=True)
+    args = (pos, vel, pref, np.array([0.5, 0.25]), np.array([1.3, 0.0]), None)
+    plain = orca_step(*args, params)[0]
+    paced = orca_step(*args, dataclasses.replace(params, keep_pace=True))[0]
+    assert np.hypot(*plain) < 1.28 and plain[1] < 0.0  # turned away and slowed
+    np.testing.assert_allclose(np.hypot(*paced), 1.3, rtol=1e-12)
+    np.testing.assert_allclose(paced / np.hypot(*paced), plain / np.hypot(*plain), rtol=0, atol=1e-12)

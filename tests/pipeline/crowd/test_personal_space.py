@@ -78,6 +78,20 @@ def test_open_space_pairs_keep_the_comfort_distance(tmp_path: Path, name: str, a
     assert mesh.contains(plan.xy.reshape(-1, 2), tol=1e-6).all()
 
 
+def test_head_on_pair_deviates_seconds_before_it_passes(tmp_path: Path) -> None:
+    """Anticipation: 2 s before their closest approach (still > 3 m apart) both have swerved over 0.1 m."""
+    scene = room(tmp_path, 12.0, 8.0, "hall")
+    a, b = ((1.0, 4.0), (11.0, 4.0 + OFFSET)), ((11.0, 4.0), (1.0, 4.0 - OFFSET))
+    plan, _ = simulate(scene, [walker(0, *a), walker(1, *b)])
+    gap = np.linalg.norm(plan.xy[0] - plan.xy[1], axis=-1)
+    early = int(np.argmin(gap)) - 2 * plan.fps
+    assert gap[early] > 3.0
+    for k, (start, goal) in enumerate((a, b)):
+        x, y = plan.xy[k, early]
+        line = start[1] + (goal[1] - start[1]) * (x - start[0]) / (goal[0] - start[0])  # its straight way
+        assert abs(y - line) > 0.1, (k, y, line)
+
+
 def test_narrow_corridor_pair_passes_at_body_distance(tmp_path: Path) -> None:
     """In a corridor too narrow for comfort the pair still passes, shoulder to shoulder but never in contact."""
     scene = room(tmp_path, 10.0, 1.2, "corridor")

@@ -108,20 +108,22 @@ def test_edinburgh_reader_parses_pixels_and_frames(tmp_path: Path) -> None:
 
 def test_stop_facing_measures_each_unbroken_stay() -> None:
     # 6 s at its start facing the desk east of it (the first 2 s, a settling turn, facing away), 4 s walking,
-    # then 5 s standing beside the start again, facing away from the desk (held up): two stays, each measured
-    # after its settling
+    # then 5 s standing 0.4 m from the start, facing away from the desk: a stay at its goal when the goal is
+    # there (each stay measured after its settling), none when it only stepped aside near its start
     from tests.pipeline.crowd.test_simulate import intent
 
     fps, frames = 30, 30 * 15
     xy, yaw = np.zeros((1, frames, 2)), np.zeros((1, frames))
     yaw[0, : 2 * fps] = np.pi  # the settling turn
     walking = slice(6 * fps, 10 * fps)
-    xy[0, walking, 0] = np.linspace(0.0, 0.2, 4 * fps)  # out and back, to 0.2 m from the start
-    xy[0, 10 * fps :, 0] = 0.2
+    xy[0, walking, 0] = np.linspace(0.0, 0.4, 4 * fps)
+    xy[0, 10 * fps :, 0] = 0.4
     yaw[0, 10 * fps :] = np.pi  # facing away from the desk
     speed = np.zeros((1, frames))
     speed[0, walking] = 0.3
     crowd = SimpleNamespace(ids=np.array([0]), xy=xy, yaw=yaw, speed=speed, fps=fps)
-    walker = intent(0, (0.0, 0.0), (9.0, 9.0)).model_copy(update={"start_object": "desk"})
     desk = SimpleNamespace(footprint=[(1.0, -0.5), (2.0, -0.5), (2.0, 0.5), (1.0, 0.5)])
-    np.testing.assert_allclose(stop_facing(crowd, [walker], {"desk": desk}), [0.0, 180.0], atol=1e-9)
+    at_desk = intent(0, (0.0, 0.0), (0.4, 0.0)).model_copy(update={"start_object": "desk", "goal_object": "desk"})
+    np.testing.assert_allclose(stop_facing(crowd, [at_desk], {"desk": desk}), [0.0, 180.0], atol=1e-9)
+    aside = intent(0, (0.0, 0.0), (9.0, 9.0)).model_copy(update={"start_object": "desk"})
+    np.testing.assert_allclose(stop_facing(crowd, [aside], {"desk": desk}), [0.0], atol=1e-9)
