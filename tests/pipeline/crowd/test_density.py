@@ -7,7 +7,8 @@ import pytest
 
 from song.datasets.run.intents import Intent, Leg
 from song.datasets.scenes import load_scene_package
-from song.pipeline.crowd._crowd_kernel import near_walkers, overlap_push, preferred_velocities, settle_moves
+from song.datasets.scenes.generate import generate_scene
+from song.pipeline.crowd._crowd_kernel import _move, near_walkers, overlap_push, preferred_velocities, settle_moves
 from song.pipeline.crowd._simulate_reference import (
     near_walkers_reference,
     overlap_push_reference,
@@ -121,6 +122,37 @@ def test_compiled_frame_moves_equal_their_reference_twin(make_scene) -> None:
             assert (new_pos[~moving] == pos[~moving]).all()
             checked += int((np.hypot(*(new_pos - pos).T) > 0).sum())
     assert checked > 300
+
+
+def test_a_walker_whose_step_is_cancelled_is_not_walked_into(tmp_path) -> None:
+    """A leader whose step along a wall is cancelled (sliding lengthened it; the shortened one would leave the
+    mesh) is not walked into by its follower: the overlap passes see the cancelled step. The state is a frame
+    of a generated restaurant's crowd (seed 21, `paper`) where, until the seventeenth session, the cancel came
+    after the passes and left the pair at 0.489 m."""
+    package = load_scene_package(generate_scene("gen_restaurant_0004", "restaurant", 1234, tmp_path, splat=False))
+    mesh = scene_navmesh(package, R, CFG.contour_error_m)
+    pos = np.array([[7.790712824941409, 3.8629661693201345], [8.2851350228926, 4.006095626490314]])
+    vel = np.array([[-0.5113709187526361, -0.7065639556714576], [-0.799915480404163, -0.013791607297903852]])
+    wanted = np.array([[-0.44042812280468635, -0.7528319258923203], [-0.8071455544414149, -0.02991521163168654]])
+    speed, dt = np.array([0.8722, 0.8984]), 1 / 30
+    stamp = np.zeros(len(mesh.move_args()[0]), dtype=np.int64)
+    step = pos[0] + wanted[0] * dt
+    assert _move(*pos[0], *step, speed[0] * dt, stamp, 0, mesh.move_args())[:2] == tuple(pos[0])  # cancelled
+    args = (
+        pos,
+        vel,
+        np.arange(2),
+        wanted,
+        np.ones(2, dtype=bool),
+        speed,
+        dt,
+        CFG.max_accel_mps2 * dt,
+        2 * R + 0.002,
+        5,
+    )
+    new_pos, _ = settle_moves(*args, mesh.move_args())
+    assert np.hypot(*(new_pos[0] - new_pos[1])) >= 2 * R
+    np.testing.assert_allclose(new_pos, settle_moves_reference(mesh, *args)[0], rtol=0, atol=1e-12)
 
 
 def test_a_walker_stalled_for_good_gives_up_that_stop_and_walks_on(make_scene) -> None:
