@@ -506,7 +506,10 @@ def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dir
 @_jit
 def lines_kernel(pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t, right_t, root,
                  neighbor_dist, max_neighbors, time_horizon, th_obst, time_step, static_full, keep_pace):  # fmt: skip
-    """Every agent's ORCA lines: ``(lines (N, L, 4) [px, py, dx, dy], counts (N,), obstacle counts (N,))``."""
+    """Every agent's ORCA lines: ``(lines (N, L, 4) [px, py, dx, dy], counts (N,), obstacle counts (N,))``.
+
+    Takes :func:`step_kernel`'s arguments but the preferred velocities; ``keep_pace`` does not change the lines.
+    """
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     size = n_vertices + max_neighbors + 1
     lines = np.zeros((n_agents, size, 4))

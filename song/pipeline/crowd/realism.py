@@ -281,13 +281,13 @@ def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_
         stays = [(intent.start_object, intent.start_xy, 0.5)] + [
             (g.goal_object, g.goal_xy, 0.3) for g in intent.route()
         ]
-        moves = np.flatnonzero(crowd.speed[k] >= 0.01)
-        before_first_move = np.arange(crowd.xy.shape[1]) < (moves[0] if len(moves) else crowd.xy.shape[1])
+        standing = crowd.speed[k] < 0.01
+        departed = np.cumsum(~standing) > 0  # from its first move on
         for n, (oid, spot, near) in enumerate(stays):
             if oid not in objects:
                 continue
-            standing = (crowd.speed[k] < 0.01) & (before_first_move if n == 0 else True)
-            at = np.flatnonzero((np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & standing)
+            staying = standing & ~departed if n == 0 else standing  # n == 0: its start
+            at = np.flatnonzero((np.hypot(*(crowd.xy[k] - np.asarray(spot)).T) < near) & staying)
             for frames in np.split(at, np.flatnonzero(np.diff(at) > 1) + 1):  # each unbroken stay
                 if len(frames) < min_stay_s * crowd.fps:
                     continue
