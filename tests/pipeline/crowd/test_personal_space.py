@@ -92,10 +92,16 @@ def test_head_on_pair_deviates_seconds_before_it_passes(tmp_path: Path) -> None:
         assert abs(y - line) > 0.1, (k, y, line)
 
 
-def test_narrow_corridor_pair_passes_at_body_distance(tmp_path: Path) -> None:
-    """In a corridor too narrow for comfort the pair still passes, shoulder to shoulder but never in contact."""
-    scene = room(tmp_path, 10.0, 1.2, "corridor")
-    intents = [walker(0, (0.6, 0.7), (9.6, 0.7)), walker(1, (9.6, 0.7), (0.6, 0.7), depart=0.3)]
+@pytest.mark.parametrize("width", [1.1, 1.2])
+def test_narrow_corridor_pair_passes_at_body_distance(tmp_path: Path, width: float) -> None:
+    """In a corridor too narrow for comfort the pair still passes, shoulder to shoulder but never in contact.
+
+    Not yet in 1.0 m, which issue 25 asks for: its strip of legal centres on the navmesh is 0.45 m, too
+    narrow for two bodies (docs/crowd.md, walls).
+    """
+    scene = room(tmp_path, 10.0, width, "corridor")
+    y = 0.1 + width / 2  # the corridor's axis (walls 0.1 m thick)
+    intents = [walker(0, (0.6, y), (9.6, y)), walker(1, (9.6, y), (0.6, y), depart=0.3)]
     plan, _ = simulate(scene, intents)
     assert all(v["status"] == "arrived" for v in plan.status.values()), plan.status
     assert closest(plan) >= 2 * R - 0.01
