@@ -136,21 +136,31 @@ def _crowds(draw):
     return pos, vel, pref, radii, speeds, build_obstacles(polygons) if polygons else None
 
 
+def _twin_lines(i: int, pos, vel, radii, speeds, obstacles) -> list:
+    """Agent i's half-planes as the reference twin builds them (obstacle lines first)."""
+    p, v = tuple(pos[i]), tuple(vel[i])
+    lines = ref._obstacle_lines(p, v, radii[i], speeds[i], obstacles, PARAMS) if obstacles else []
+    for j in ref._agent_neighbours(i, [tuple(q) for q in pos], PARAMS):
+        lines.append(ref._agent_line(p, v, radii[i], tuple(pos[j]), tuple(vel[j]), radii[j], PARAMS))
+    return lines
+
+
+def _worst_slack(lines: list, velocity) -> float:
+    """How far (m/s) the velocity lies beyond the half-plane it breaks most (≤ 0 when it breaks none)."""
+    return max((ref._det(d, (q[0] - velocity[0], q[1] - velocity[1])) for q, d in lines), default=0.0)
+
+
 @settings(max_examples=60, deadline=None)
 @given(_crowds())
 def test_answer_is_in_the_disc_and_every_half_plane_when_feasible(crowd) -> None:
     pos, vel, pref, radii, speeds, obstacles = crowd
     out = orca_step(pos, vel, pref, radii, speeds, obstacles, PARAMS)
     assert (np.linalg.norm(out, axis=1) <= speeds * (1 + SPEED_TOL)).all()
-    for i in range(len(pos)):  # the half-planes as the reference twin builds them
-        p, v = tuple(pos[i]), tuple(vel[i])
-        lines = ref._obstacle_lines(p, v, radii[i], speeds[i], obstacles, PARAMS) if obstacles else []
-        for j in ref._agent_neighbours(i, [tuple(q) for q in pos], PARAMS):
-            lines.append(ref._agent_line(p, v, radii[i], tuple(pos[j]), tuple(vel[j]), radii[j], PARAMS))
+    for i in range(len(pos)):
+        lines = _twin_lines(i, pos, vel, radii, speeds, obstacles)
         fail, _ = ref._lp2(lines, speeds[i], tuple(pref[i]), False)
         if fail == len(lines):  # feasible: the answer breaks no half-plane
-            slack = [ref._det(d, (q[0] - out[i, 0], q[1] - out[i, 1])) for q, d in lines]
-            assert max(slack, default=0.0) <= LINE_TOL
+            assert _worst_slack(lines, out[i]) <= LINE_TOL
 
 
 PACED = dataclasses.replace(PARAMS, keep_pace=True)
@@ -171,16 +181,12 @@ def test_keep_pace_lengthens_the_answer_within_every_half_plane(crowd) -> None:
     plain = orca_step(pos, vel, pref, radii, speeds, obstacles, PARAMS)
     paced = orca_step(pos, vel, pref, radii, speeds, obstacles, PACED)
     for i in range(len(pos)):
-        p, v = tuple(pos[i]), tuple(vel[i])
-        lines = ref._obstacle_lines(p, v, radii[i], speeds[i], obstacles, PARAMS) if obstacles else []
-        for j in ref._agent_neighbours(i, [tuple(q) for q in pos], PARAMS):
-            lines.append(ref._agent_line(p, v, radii[i], tuple(pos[j]), tuple(vel[j]), radii[j], PARAMS))
+        lines = _twin_lines(i, pos, vel, radii, speeds, obstacles)
         fail, _ = ref._lp2(lines, speeds[i], tuple(pref[i]), False)
         if fail < len(lines):  # infeasible: linearProgram3's answer stands
             np.testing.assert_array_equal(paced[i], plain[i])
             continue
-        slack = [ref._det(d, (q[0] - paced[i, 0], q[1] - paced[i, 1])) for q, d in lines]
-        assert max(slack, default=0.0) <= LINE_TOL
+        assert _worst_slack(lines, paced[i]) <= LINE_TOL
         fast, slow = np.hypot(*paced[i]), np.hypot(*plain[i])
         assert abs(plain[i, 0] * paced[i, 1] - plain[i, 1] * paced[i, 0]) <= 1e-9 * max(fast, 1.0)  # same direction
         assert slow - 1e-12 <= fast <= max(slow, min(np.hypot(*pref[i]), speeds[i])) + 1e-9
