@@ -61,9 +61,9 @@ class IntentsConfig(_Section):
     speed_min_mps: float = Field(0.5, gt=0.0, description="pedestrian speed lower bound, m/s (paper)")
     speed_max_mps: float = Field(1.0, gt=0.0, description="pedestrian speed upper bound, m/s (paper)")
     lead_in_s: float = Field(
-        8.0, ge=0.0, le=60.0, description="first departures drawn from -this on: at t = 0 some are already walking, s"
+        12.0, ge=0.0, le=60.0, description="first departures drawn from -this on: at t = 0 some are already walking, s"
     )
-    max_depart_s: float = Field(5.0, ge=0.0, description="first departures drawn in [-lead_in_s, this], s")
+    max_depart_s: float = Field(8.0, ge=0.0, description="first departures drawn in [-lead_in_s, this], s")
     scenario_s: float = Field(60.0, gt=0.0, description="routines are chained to keep people busy this long, s")
     max_legs: int = Field(4, ge=1, le=8, description="most legs (object-to-object walks) in one routine")
 
