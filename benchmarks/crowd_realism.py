@@ -51,6 +51,7 @@ from song.pipeline.crowd.realism import (  # noqa: E402
     Track,
     crowd_statistics,
     density,
+    heading_reversals,
     read_edinburgh_tracks,
     read_obsmat,
     stop_facing,
@@ -161,6 +162,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
     results = list(iter_run(scenes, run, config, ["intents", "crowd"], workers=2))
     seconds = [r.seconds.get("crowd", 0.0) for r in results if r.status == "ok"]
     tracks, closest, shares, sample_shares, statuses, facing, walls = [], np.inf, [], [], [], [], []
+    reversals, walking_minutes = 0, 0.0
     walkable: list[float] = []
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
@@ -172,6 +174,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
         facing += stop_facing(crowd, read_intents(scene / "intents.json").intents, objects)
         scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
         tracks.append(scene_tracks)
+        count, minutes = heading_reversals(scene_tracks)
+        reversals, walking_minutes = reversals + count, walking_minutes + minutes
         mesh = load_navmesh(scene)
         field = WallDistance(mesh)
         walls.append(wall_clearances(scene_tracks, lambda xy, f=field: f.at(xy) - r))
@@ -197,6 +201,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
             "walking_share_samples_5_55_min": round(float(np.min(sample)), 4) if len(sample) else None,
             **_wall_stats(np.concatenate(walls) if walls else np.zeros(0)),
             "density_walkable_per_m2": round(float(np.median(walkable)), 4) if walkable else None,
+            "heading_reversals_per_walking_min": round(reversals / walking_minutes, 2) if walking_minutes else None,
             "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
             "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
@@ -222,6 +227,7 @@ def markdown(rows: dict[str, dict]) -> str:
         ("standing share", lambda s: s["standing_share"]),
         ("tortuosity", lambda s: s["tortuosity_median"]),
         ("accel RMS, m/s²", lambda s: s["acceleration_rms_mps2"]),
+        ("heading reversals / walking min", lambda s: s["heading_reversals_per_walking_min"]),
         ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),
         ("density, /m² covered (walkable)", _density_cell),
         ("last stop / whole routine reached", lambda s: f"{s['arrived_share']} / {s['routine_complete_share']}"),

@@ -21,7 +21,8 @@ measured. With ``MOVING_MPS`` = 0.2 m/s as the walking threshold:
 SONG's crowds also know what people stand at and what walls they pass: :func:`stop_facing` measures
 how far from their object pedestrians face while standing at it, and :func:`wall_clearances` how
 close walkers come to walls and furniture (no real reference for either: the annotations have no
-objects, and no walls indoors).
+objects, and no walls indoors), and :func:`heading_reversals` how often a walker's heading swings
+one way and straight back at the crowd's own frame rate (the 2.5 Hz annotations cannot show it).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ INTERACTION_M = 2.0
 HEAD_ON_DEG, SAME_DIR_DEG = 135.0, 45.0
 WINDOW_S = 5.0
 COVER_CELL_M = 0.5
+SWING_DEG, SWING_FRAMES, REVERSAL_FRAMES = 20.0, 3, 12  # a swing: > 20° in 3 frames; back within 12 (0.4 s at 30 FPS)
 
 
 @dataclass(frozen=True)
@@ -217,6 +219,35 @@ def wall_clearances(tracks: list[Track], clearance_at) -> np.ndarray:
         if moving.any():
             gaps.append(np.asarray(clearance_at(track.xy[moving]), dtype=np.float64))
     return np.concatenate(gaps)
+
+
+def heading_reversals(tracks: list[Track]) -> tuple[int, float]:
+    """Heading reversals on full-rate tracks: ``(count, walking minutes)``.
+
+    A swing is a turn of the walking direction by more than ``SWING_DEG`` within ``SWING_FRAMES``
+    frames, both ends moving (> ``MOVING_MPS``); a reversal is a swing followed within
+    ``REVERSAL_FRAMES`` frames by one the other way (at 30 FPS: 20° in 0.1 s and back within 0.4 s, a
+    zigzag no walker makes on purpose). Tracks are taken as they are (not resampled): the swings last
+    a few frames. Walking minutes count the moving frames.
+    """
+    count, minutes = 0, 0.0
+    for track in tracks:
+        if len(track.t) < SWING_FRAMES + 2:
+            continue
+        dt = np.diff(track.t)
+        v = np.diff(track.xy, axis=0) / dt[:, None]
+        moving = np.hypot(*v.T) > MOVING_MPS
+        minutes += float(dt[moving].sum()) / 60.0
+        heading = np.unwrap(np.arctan2(v[:, 1], v[:, 0]))
+        turn = heading[SWING_FRAMES:] - heading[:-SWING_FRAMES]
+        both = moving[SWING_FRAMES:] & moving[:-SWING_FRAMES]
+        swing = np.where(both & (np.abs(turn) > np.radians(SWING_DEG)), np.sign(turn), 0.0)
+        last, side = -REVERSAL_FRAMES - 1, 0.0
+        for i in np.flatnonzero(swing):
+            if side and swing[i] == -side and i - last <= REVERSAL_FRAMES:
+                count += 1
+            last, side = i, swing[i]
+    return count, minutes
 
 
 def read_obsmat(path: str | Path) -> list[Track]:

@@ -14,6 +14,7 @@ from song.pipeline.crowd.realism import (
     covered_area,
     crowd_statistics,
     density,
+    heading_reversals,
     pass_distances,
     read_edinburgh_tracks,
     read_obsmat,
@@ -65,6 +66,21 @@ def test_wall_clearances_are_taken_over_moving_samples() -> None:
     gaps = wall_clearances([along, standing], lambda xy: xy[:, 1] - 0.25)
     assert len(gaps) == 26  # 0, 0.4, ..., 10 s
     np.testing.assert_allclose(gaps, 0.05)
+
+
+def test_heading_reversals_count_zigzags_not_turns() -> None:
+    """A 30 FPS walk that swings 30° left and straight back every 0.2 s reverses; a smooth turn does not."""
+    fps, speed = 30.0, 1.0
+    t = np.arange(0.0, 10.0, 1.0 / fps)
+    smooth = np.cumsum(speed / fps * np.column_stack([np.cos(0.3 * t), np.sin(0.3 * t)]), axis=0)
+    zig = np.where((np.arange(len(t)) // 6) % 2 == 0, np.radians(15.0), -np.radians(15.0))
+    zigzag = np.cumsum(speed / fps * np.column_stack([np.cos(zig), np.sin(zig)]), axis=0)
+    assert heading_reversals([Track(t, smooth)]) == (0, pytest.approx((len(t) - 1) / fps / 60.0))
+    count, minutes = heading_reversals([Track(t, zigzag)])
+    assert count == len(t) // 6 - 2  # every swing after the first is one back
+    assert minutes == pytest.approx((len(t) - 1) / fps / 60.0)
+    standing = Track(t, np.zeros((len(t), 2)))
+    assert heading_reversals([standing]) == (0, 0.0)
 
 
 def test_density_on_the_covered_floor_and_on_a_given_area() -> None:
