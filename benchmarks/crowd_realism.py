@@ -15,7 +15,8 @@ and that are removed, the walking share among present pedestrians per second bet
 between the body and the nearest wall or furniture over moving samples (median, p5, share under
 0.15 m; from the scene's navmesh, conservative by up to a grid cell), the density on the walkable
 area (the scene's navmesh; median over scenes) beside the density on the floor people covered (the
-one measure the real recordings allow), and the crowd stage's median seconds per scene. Prints JSON
+one measure the real recordings allow), the heading reversals per walking minute (zigzags on the 30 FPS
+tracks, ``realism.heading_reversals``) and the crowd stage's median seconds per scene. Prints JSON
 (and a markdown table with ``--markdown``).
 
 The crowd is chaotic: a change that helps one seed can hurt the next. ``--seeds 1 2 … 12`` runs every
