@@ -206,8 +206,9 @@ class Navmesh:
     def _hashes(self) -> tuple:
         """``(grid, tstart, titems, sstart, sitems)``: spatial hashes of the triangles and walls, built once.
 
-        They depend only on the vertices, triangles and boundary segments, which never change after
-        :func:`navmesh_from_polygons` has triangulated them, so they outlive :func:`_forget_kernel`.
+        They depend only on the vertices, triangles and boundary segments, so
+        :func:`navmesh_from_polygons` reads them before it has filled in the fields the kernel arrays
+        also hold (the boundary edges' triangles, the visibility graph).
         """
         if "hashes" not in self._cache:
             verts = np.ascontiguousarray(self.vertices, dtype=np.float64)
@@ -562,10 +563,10 @@ def _triangulate(polys: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v = np.vstack(rings)
         ends = np.cumsum([len(r) for r in rings]).astype(np.uint32)
         t = mapbox_earcut.triangulate_float64(v, ends).reshape(-1, 3).astype(np.int64)
-        start = np.concatenate([[0], ends[:-1]]).astype(np.int64)
-        for s, e in zip(start, ends.astype(np.int64), strict=True):
-            ids = np.arange(s, e)
-            segs.append(np.stack([ids, np.roll(ids, -1)], -1) + offset)
+        ids = np.arange(len(v), dtype=np.int64)
+        nxt = ids + 1  # each ring vertex links to the next, a ring's last back to its first
+        nxt[ends.astype(np.int64) - 1] = np.concatenate([[0], ends[:-1]]).astype(np.int64)
+        segs.append(np.stack([ids, nxt], -1) + offset)
         verts.append(v)
         tris.append(t + offset)
         offset += len(v)
@@ -615,14 +616,17 @@ def _visibility_edges(mesh: Navmesh) -> np.ndarray:
 
     All reflex pairs are tried, but a pair costs two cross products unless it is bitangent, and a
     ray walks only the hash cells it crosses until its first wall, so the build grows about with the
-    scene's area (not with its square, as a test of every pair against every wall did).
+    scene's area (not with its square, as a test of every pair against every wall did). It reads the
+    spatial hashes, not the kernel arrays, which need the graph it builds.
     """
     if len(mesh.reflex) < 2:
         return np.zeros((0, 2), np.int64)
-    k = mesh._kernel()
-    return _k.visibility_edges(
-        k["reflex"], k["verts"], k["prev"], k["next"], k["va"], k["vb"], k["grid"], k["sstart"], k["sitems"]
-    )
+    grid, _, _, sstart, sitems = mesh._hashes()
+    prev, nxt = _ring_links(len(mesh.vertices), mesh.segments)
+    verts = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    va, vb = (np.ascontiguousarray(mesh.segments[:, i], dtype=np.int64) for i in (0, 1))
+    reflex = np.ascontiguousarray(mesh.reflex, dtype=np.int64)
+    return _k.visibility_edges(reflex, verts, prev, nxt, va, vb, grid, sstart, sitems)
 
 
 def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
@@ -649,25 +653,16 @@ def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
         d = b - a
         inward = np.stack([-d[:, 1], d[:, 0]], -1) / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
         probe = 0.5 * (a + b) + inward * 1e-7
-        mesh.seg_triangle = mesh.locate(probe, tol=1e-6)
+        grid, tstart, titems, _, _ = mesh._hashes()  # not the kernel arrays: they hold seg_triangle
+        verts = np.ascontiguousarray(vertices, dtype=np.float64)
+        tris = np.ascontiguousarray(triangles, dtype=np.int64)
+        mesh.seg_triangle = _k.locate(np.ascontiguousarray(probe), 1e-6, verts, tris, grid, tstart, titems)
         lost = mesh.seg_triangle < 0
         if lost.any():  # a sliver: fall back to the nearest triangle centroid
             centroid = vertices[triangles].mean(axis=1)
             mesh.seg_triangle[lost] = np.argmin(((probe[lost, None] - centroid[None]) ** 2).sum(-1), axis=1)
-    _forget_kernel(mesh)  # the kernel arrays hold the boundary edges' triangles
     mesh.vis_edges = _visibility_edges(mesh)
-    _forget_kernel(mesh)  # ... and the visibility graph: rebuild them on first use
-    return mesh
-
-
-def _forget_kernel(mesh: Navmesh) -> None:
-    """Drop the kernel arrays derived from fields that :func:`navmesh_from_polygons` fills in late.
-
-    The spatial hashes stay (:meth:`Navmesh._hashes`): rebuilding them three times cost a third of
-    every carving (crowd stall replans).
-    """
-    for key in ("kernel", "args", "move_args"):
-        mesh._cache.pop(key, None)
+    return mesh  # the kernel arrays are built on first use, from the finished fields
 
 
 def build_navmesh(
