@@ -92,12 +92,20 @@ def test_head_on_pair_deviates_seconds_before_it_passes(tmp_path: Path) -> None:
         assert abs(y - line) > 0.1, (k, y, line)
 
 
-@pytest.mark.parametrize("width", [1.1, 1.2])
+NARROWEST_MISSED = pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="a known miss: the navmesh strip of a 1.0 m corridor is 0.45 m, too narrow for two bodies",
+)
+
+
+@pytest.mark.parametrize("width", [pytest.param(1.0, marks=NARROWEST_MISSED), 1.1, 1.2])
 def test_narrow_corridor_pair_passes_at_body_distance(tmp_path: Path, width: float) -> None:
     """In a corridor too narrow for comfort the pair still passes, shoulder to shoulder but never in contact.
 
     Not yet in 1.0 m, which issue 25 asks for: its strip of legal centres on the navmesh is 0.45 m, too
-    narrow for two bodies (docs/crowd.md, walls).
+    narrow for two bodies (docs/crowd.md, walls), and both walkers give up. The case is kept as a strict
+    expected failure, so the day the mesh lets them pass it turns red and the mark must go.
     """
     scene = room(tmp_path, 10.0, width, "corridor")
     y = 0.1 + width / 2  # the corridor's axis (walls 0.1 m thick)
