@@ -482,6 +482,8 @@ def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dir
     """New (N, 2) velocities: every agent's lines, then linearProgram2 (and 3 where 2 is infeasible).
 
     With ``keep_pace`` a feasible answer slower than preferred is then lengthened (:func:`_keep_pace`).
+    An agent whose speed limit is 0 (someone standing) gets 0 without its programs: no velocity within a
+    circle of radius 0 is anything else, and in a dense crowd most of the agents stand.
     """
     n_agents, n_vertices = pos.shape[0], points.shape[0]
     out = np.zeros((n_agents, 2))
@@ -491,6 +493,8 @@ def step_kernel(pos, vel, pref, radii, wall_radii, speeds, points, nxt, prv, dir
     work = _work(n_vertices, max_neighbors)
     grid = agent_grid(pos, neighbor_dist)
     for i in range(n_agents):
+        if speeds[i] <= 0.0:
+            continue
         n, n_obst = _agent_lines(i, pos, vel, radii, wall_radii, speeds, points, nxt, prv, dirs, convex, left_t,
                                  right_t, root, neighbor_dist, max_neighbors, time_horizon, th_obst, time_step,
                                  static_full, lines, work, grid)  # fmt: skip
