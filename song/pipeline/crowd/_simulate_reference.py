@@ -22,7 +22,7 @@ def overlap_push_reference(target: np.ndarray, moving: np.ndarray, min_dist: flo
     share = np.where(moving[None, :], 0.5, 1.0)
     push = (diff / np.maximum(dist, 1e-9)[..., None] * (share * overlap)[..., None]).sum(axis=1)
     push[~moving] = 0.0
-    return push, bool(overlap.any())
+    return push, bool(overlap[moving].any())  # overlaps between people standing do not count
 
 
 def preferred_velocities_reference(pos, cur, nxt, has_next, goal, speed, moving, radius, dt) -> np.ndarray:

@@ -91,6 +91,11 @@ def test_compiled_pair_loops_equal_their_reference_twins() -> None:
         ref, ref_found = overlap_push_reference(pos, moving, 0.6)
         np.testing.assert_allclose(push, ref, atol=1e-12)
         assert found == ref_found
+        # two people standing too close push nobody, so they do not keep the overlap passes going
+        standing_pair = np.array([[0.0, 0.0], [0.3, 0.0], [3.0, 0.0]])
+        for pushes in (overlap_push, overlap_push_reference):
+            assert not pushes(standing_pair, np.array([False, False, True]), 0.6)[1]
+            assert pushes(standing_pair, np.array([True, False, True]), 0.6)[1]
         cur, nxt, goal = (pos + rng.normal(0, 2.0, (n, 2)) for _ in range(3))
         has_next, speed = rng.random(n) < 0.5, rng.uniform(0.5, 1.5, n)
         goal[:2] = pos[:2] + 0.1  # slowing down at the goal
