@@ -233,3 +233,26 @@ def test_neighbours_and_orca_lines_match_rvo2(seed: int) -> None:
         np.testing.assert_allclose(points, [t[1] for t in theirs], atol=F32_LINE_TOL)
         n_obstacle_lines += count - sim.get_agent_num_agent_neighbors(i)
     assert n_obstacle_lines > n  # the walls and pillars are in play
+
+
+def test_agents_with_speed_limit_zero_get_rvo2s_answer() -> None:
+    """Someone standing (speed limit 0) gets 0, as from RVO2's programs, which our step skips for them.
+
+    The others' answers still see them (as neighbours), also as in RVO2.
+    """
+    params = OrcaParams(1 / 30, 5.0, 10, 2.0, 2.0)
+    rng = np.random.default_rng(5)
+    n = 12
+    pos = rng.uniform(0.0, 3.0, (n, 2))
+    vel = rng.normal(0.0, 0.5, (n, 2))
+    pref = rng.normal(0.0, 1.0, (n, 2))
+    speeds = np.where(np.arange(n) % 3 == 0, 0.0, SPEED)
+    sim = _rvo2(params, pos, velocities=vel)
+    for i in range(n):
+        sim.set_agent_max_speed(i, float(speeds[i]))
+        sim.set_agent_pref_velocity(i, (float(pref[i, 0]), float(pref[i, 1])))
+    sim.do_step()
+    theirs = np.array([sim.get_agent_velocity(i).to_tuple() for i in range(n)])
+    ours = orca_step(pos, vel, pref, np.full(n, RADIUS), speeds, None, params)
+    assert np.all(ours[speeds == 0.0] == 0.0)
+    np.testing.assert_allclose(ours, theirs, atol=F32_VEL_TOL)
