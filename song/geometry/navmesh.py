@@ -203,55 +203,61 @@ class Navmesh:
         """(S, 2) end points of the boundary segments, m."""
         return self.vertices[self.segments[:, 1]]
 
-    def _hashes(self) -> tuple:
-        """``(grid, tstart, titems, sstart, sitems)``: spatial hashes of the triangles and walls, built once.
+    def _geometry(self) -> dict:
+        """Flat arrays of the mesh's shape alone, built once: its vertices, triangles, walls and spatial hashes.
 
-        They depend only on the vertices, triangles and boundary segments, so
-        :func:`navmesh_from_polygons` reads them before it has filled in the fields the kernel arrays
-        also hold (the boundary edges' triangles, the visibility graph).
+        ``verts, tris, va, vb`` (the walls' vertex ids), ``reflex, prev, next`` (each boundary vertex's
+        neighbours along its ring) and the hashes ``grid, tstart, titems, sstart, sitems``. They depend
+        only on the vertices, triangles and boundary segments, so :func:`navmesh_from_polygons` queries
+        them (:meth:`locate`, the visibility graph) before it has filled in the fields that
+        :meth:`_kernel` adds (the boundary edges' triangles, the visibility graph).
         """
-        if "hashes" not in self._cache:
+        if "geometry" not in self._cache:
             verts = np.ascontiguousarray(self.vertices, dtype=np.float64)
             lo = verts.min(axis=0) - BUCKET_M if len(verts) else np.zeros(2)
             hi = verts.max(axis=0) + BUCKET_M if len(verts) else np.ones(2)
             n = np.maximum(np.ceil((hi - lo) / BUCKET_M).astype(np.int64), 1)
-            grid = np.array([lo[0], lo[1], BUCKET_M, n[0], n[1]], dtype=np.float64)
             tri = verts[self.triangles].reshape(-1, 3, 2)
             a, b = self.seg_a.reshape(-1, 2), self.seg_b.reshape(-1, 2)
             margin = 1e-4  # beyond rounding: a ray meets every wall it touches in the cells it walks
             tstart, titems = _k.hash_boxes(tri.min(axis=1) - margin, tri.max(axis=1) + margin, lo, n, BUCKET_M)
             sstart, sitems = _k.hash_boxes(np.minimum(a, b) - margin, np.maximum(a, b) + margin, lo, n, BUCKET_M)
-            self._cache["hashes"] = (grid, tstart, titems, sstart, sitems)
-        return self._cache["hashes"]
-
-    def _kernel(self) -> dict:
-        """Flat arrays for the compiled queries (:mod:`song.geometry._navmesh_kernel`), built once."""
-        if "kernel" not in self._cache:
-            verts = np.ascontiguousarray(self.vertices, dtype=np.float64)
-            grid, tstart, titems, sstart, sitems = self._hashes()
             prev, nxt = _ring_links(len(verts), self.segments)
-            e = self.vis_edges.reshape(-1, 2)
-            length = np.hypot(*(verts[self.reflex[e[:, 0]]] - verts[self.reflex[e[:, 1]]]).T)
-            adj = sparse.csr_matrix(
-                (np.r_[length, length], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-                shape=(len(self.reflex),) * 2,
-            )
-            adj.sort_indices()
-            self._cache["kernel"] = {
+            self._cache["geometry"] = {
                 "verts": verts,
                 "tris": np.ascontiguousarray(self.triangles, dtype=np.int64),
                 "va": np.ascontiguousarray(self.segments[:, 0], dtype=np.int64),
                 "vb": np.ascontiguousarray(self.segments[:, 1], dtype=np.int64),
-                "seg_tri": np.ascontiguousarray(self.seg_triangle, dtype=np.int64),
-                "seg_comp": np.ascontiguousarray(self.component[self.seg_triangle], dtype=np.int64),
                 "reflex": np.ascontiguousarray(self.reflex, dtype=np.int64),
                 "prev": prev,
                 "next": nxt,
-                "grid": grid,
+                "grid": np.array([lo[0], lo[1], BUCKET_M, n[0], n[1]], dtype=np.float64),
                 "tstart": tstart,
                 "titems": titems,
                 "sstart": sstart,
                 "sitems": sitems,
+            }
+        return self._cache["geometry"]
+
+    def _kernel(self) -> dict:
+        """:meth:`_geometry`'s arrays plus the boundary edges' triangles and the visibility graph, built once.
+
+        The flat arrays the compiled queries (:mod:`song.geometry._navmesh_kernel`) take.
+        """
+        if "kernel" not in self._cache:
+            g = self._geometry()
+            verts, reflex = g["verts"], g["reflex"]
+            e = self.vis_edges.reshape(-1, 2)
+            length = np.hypot(*(verts[reflex[e[:, 0]]] - verts[reflex[e[:, 1]]]).T)
+            adj = sparse.csr_matrix(
+                (np.r_[length, length], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                shape=(len(reflex),) * 2,
+            )
+            adj.sort_indices()
+            self._cache["kernel"] = {
+                **g,
+                "seg_tri": np.ascontiguousarray(self.seg_triangle, dtype=np.int64),
+                "seg_comp": np.ascontiguousarray(self.component[self.seg_triangle], dtype=np.int64),
                 "vptr": adj.indptr.astype(np.int64),
                 "vidx": adj.indices.astype(np.int64),
                 "vlen": adj.data.astype(np.float64),
@@ -297,9 +303,9 @@ class Navmesh:
         Returns:
             (N,) int64 triangle ids.
         """
-        k = self._kernel()
+        g = self._geometry()  # not the kernel arrays: :func:`navmesh_from_polygons` locates before it can build them
         points = np.ascontiguousarray(np.atleast_2d(points), dtype=np.float64)
-        return _k.locate(points, float(tol), k["verts"], k["tris"], k["grid"], k["tstart"], k["titems"])
+        return _k.locate(points, float(tol), g["verts"], g["tris"], g["grid"], g["tstart"], g["titems"])
 
     def nearest_boundary(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Closest boundary point to each point.
@@ -617,16 +623,13 @@ def _visibility_edges(mesh: Navmesh) -> np.ndarray:
     All reflex pairs are tried, but a pair costs two cross products unless it is bitangent, and a
     ray walks only the hash cells it crosses until its first wall, so the build grows about with the
     scene's area (not with its square, as a test of every pair against every wall did). It reads the
-    spatial hashes, not the kernel arrays, which need the graph it builds.
+    mesh's shape (:meth:`Navmesh._geometry`), not the kernel arrays, which hold the graph it builds.
     """
     if len(mesh.reflex) < 2:
         return np.zeros((0, 2), np.int64)
-    grid, _, _, sstart, sitems = mesh._hashes()
-    prev, nxt = _ring_links(len(mesh.vertices), mesh.segments)
-    verts = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
-    va, vb = (np.ascontiguousarray(mesh.segments[:, i], dtype=np.int64) for i in (0, 1))
-    reflex = np.ascontiguousarray(mesh.reflex, dtype=np.int64)
-    return _k.visibility_edges(reflex, verts, prev, nxt, va, vb, grid, sstart, sitems)
+    g = mesh._geometry()
+    names = ("reflex", "verts", "prev", "next", "va", "vb", "grid", "sstart", "sitems")
+    return _k.visibility_edges(*(g[n] for n in names))
 
 
 def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
@@ -653,10 +656,7 @@ def navmesh_from_polygons(polys: list, params: NavmeshParams) -> Navmesh:
         d = b - a
         inward = np.stack([-d[:, 1], d[:, 0]], -1) / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
         probe = 0.5 * (a + b) + inward * 1e-7
-        grid, tstart, titems, _, _ = mesh._hashes()  # not the kernel arrays: they hold seg_triangle
-        verts = np.ascontiguousarray(vertices, dtype=np.float64)
-        tris = np.ascontiguousarray(triangles, dtype=np.int64)
-        mesh.seg_triangle = _k.locate(np.ascontiguousarray(probe), 1e-6, verts, tris, grid, tstart, titems)
+        mesh.seg_triangle = mesh.locate(probe, tol=1e-6)
         lost = mesh.seg_triangle < 0
         if lost.any():  # a sliver: fall back to the nearest triangle centroid
             centroid = vertices[triangles].mean(axis=1)
