@@ -20,7 +20,7 @@ import numpy as np
 from song.geometry._astar_kernel import heap_pop, heap_push, heap_reserve
 
 TOUCH_EPS = 1e-12  # |cross| below this (m²) counts as collinear (coordinates are ≤ 1 km)
-SHORTEN_M = 1e-7  # rays are shortened by this at both ends: touching an end point's own walls is no hit
+SHORTEN_M = 1e-7  # a move test's segment is shortened by this at both ends (see segments_clear)
 NUDGE_M = 1e-6  # boundary points are moved this far into their triangle
 
 
@@ -39,8 +39,14 @@ def _zero(v):
 
 
 @_jit
-def _blocked(px, py, qx, qy, ax, ay, bx, by):
-    """Segment p→q hits wall a→b (crossing or touching, collinear overlap excluded)."""
+def _blocked(px, py, qx, qy, ax, ay, bx, by, ends_on_mesh):
+    """Segment p→q hits wall a→b: it crosses the wall, or the wall's end touches the segment's inside.
+
+    With ``ends_on_mesh`` (both ends are mesh points, as in every line-of-sight test), an end of the
+    segment lying on the wall is no hit: a segment that left the mesh there would have to cross another
+    wall to reach its other end. Without it (a move toward any target), touching counts as a hit.
+    Collinear overlap is never a hit (a path may run along a wall).
+    """
     dx, dy = qx - px, qy - py
     ex, ey = bx - ax, by - ay
     o1 = _zero(_cross(dx, dy, ax - px, ay - py))
@@ -49,6 +55,8 @@ def _blocked(px, py, qx, qy, ax, ay, bx, by):
         return False
     o3 = _zero(_cross(ex, ey, px - ax, py - ay))
     o4 = _zero(_cross(ex, ey, qx - ax, qy - ay))
+    if ends_on_mesh:
+        return o1 * o2 <= 0.0 and o3 * o4 < 0.0
     return o1 * o2 <= 0.0 and o3 * o4 <= 0.0
 
 
@@ -80,16 +88,16 @@ def _cell(x, y, ox, oy, nx, ny, bucket):
 
 # ---- rays -----------------------------------------------------------------------------------------
 @_jit
-def _ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick, shorten=SHORTEN_M):
-    """Segment p→q stays on the mesh: it hits no wall (walls va[k]→vb[k] as vertex ids).
+def _ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick, ends_on_mesh=True, shorten=0.0):
+    """Segment p→q stays on the mesh: it hits no wall (walls va[k]→vb[k] as vertex ids, see :func:`_blocked`).
 
-    The segment is first shortened by ``shorten`` m at both ends (touching an end point's own walls
-    is then no hit); stamps equal to ``tick`` mark walls already tested for this segment.
+    The segment is first shortened by ``shorten`` m at both ends; stamps equal to ``tick`` mark walls
+    already tested for this segment.
     """
     dx, dy = qx - px, qy - py
     length = math.hypot(dx, dy)
     s = min(shorten, 0.5 * length)
-    if length > 0.0:
+    if length > 0.0 and s > 0.0:
         px, py = px + dx / length * s, py + dy / length * s
         qx, qy = qx - dx / length * s, qy - dy / length * s
     ox, oy, bucket = hgrid[0], hgrid[1], hgrid[2]
@@ -113,7 +121,7 @@ def _ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick
                 continue
             stamp[k] = tick
             a, b = va[k], vb[k]
-            if _blocked(px, py, qx, qy, verts[a, 0], verts[a, 1], verts[b, 0], verts[b, 1]):
+            if _blocked(px, py, qx, qy, verts[a, 0], verts[a, 1], verts[b, 0], verts[b, 1], ends_on_mesh):
                 return False
         if ix == ex and iy == ey:
             break
@@ -130,18 +138,24 @@ def _ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick
             if stamp[k] != tick:
                 stamp[k] = tick
                 a, b = va[k], vb[k]
-                if _blocked(px, py, qx, qy, verts[a, 0], verts[a, 1], verts[b, 0], verts[b, 1]):
+                if _blocked(px, py, qx, qy, verts[a, 0], verts[a, 1], verts[b, 0], verts[b, 1], ends_on_mesh):
                     return False
     return True
 
 
 @_jit
 def segments_clear(p, q, va, vb, verts, hgrid, hstart, hitems):
-    """(N,) bool: each segment p[i]→q[i] hits no wall."""
+    """(N,) bool: each segment p[i]→q[i] hits no wall, touching counted as a hit (the crowd's move test).
+
+    Segments are shortened by ``SHORTEN_M`` at both ends, so touching an end point's own walls is no hit.
+    """
     stamp = np.zeros(len(va), dtype=np.int64)
     out = np.empty(len(p), dtype=np.bool_)
     for i in range(len(p)):
-        out[i] = _ray_clear(p[i, 0], p[i, 1], q[i, 0], q[i, 1], va, vb, verts, hgrid, hstart, hitems, stamp, i + 1)
+        a, b = p[i], q[i]
+        out[i] = _ray_clear(
+            a[0], a[1], b[0], b[1], va, vb, verts, hgrid, hstart, hitems, stamp, i + 1, False, SHORTEN_M
+        )
     return out
 
 
@@ -512,8 +526,8 @@ def constrain_moves(pos, target, va, vb, verts, tris, seg_tri, hgrid, hstart, hi
     dummy = np.zeros(0, dtype=np.int64)
     for i in range(len(pos)):
         px, py, qx, qy = pos[i, 0], pos[i, 1], target[i, 0], target[i, 1]
-        if _ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, i + 1, 0.0):
-            continue  # unshortened: a target a hair beyond a wall is outside
+        if _ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, i + 1, False):
+            continue  # a target on a wall's line counts as leaving: it may be a hair outside
         cx, cy, _, k = _nearest_wall(target[i, 0], target[i, 1], va, vb, verts, -1, dummy)
         out[i, 0], out[i, 1] = _nudge(cx, cy, k, verts, tris, seg_tri)
     return out

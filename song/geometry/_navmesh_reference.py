@@ -15,7 +15,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from song.geometry._navmesh_kernel import SHORTEN_M, TOUCH_EPS
+from song.geometry._navmesh_kernel import TOUCH_EPS
 from song.geometry.navmesh import Navmesh, _component_rings, _cross, _ring_links
 
 STEPS_16 = [(1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)]
@@ -34,7 +34,7 @@ def points_on_mesh(mesh: Navmesh, n: int, rng: np.random.Generator) -> np.ndarra
 
 
 def segments_blocked(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Whether query segments p→q hit wall segments a→b (crossing or touching, not collinear).
+    """Whether query segments p→q hit wall segments a→b (the kernel's ``_blocked``, vectorised).
 
     Args:
         p: (..., 2) float64 query segment starts, m.
@@ -43,7 +43,8 @@ def segments_blocked(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray)
         b: (..., 2) float64 wall segment ends, m.
 
     Returns:
-        (...) bool. Collinear overlaps do not count (a path may run along a wall).
+        (...) bool: a crossing, or a wall end touching the segment's inside. A segment end on the
+        wall and collinear overlaps do not count (a path may start on or run along a wall).
     """
     dx, dy = q[..., 0] - p[..., 0], q[..., 1] - p[..., 1]
     ex, ey = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
@@ -53,18 +54,13 @@ def segments_blocked(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray)
     o4 = _cross(ex, ey, q[..., 0] - a[..., 0], q[..., 1] - a[..., 1])
     o1, o2, o3, o4 = (np.where(np.abs(o) < TOUCH_EPS, 0.0, o) for o in (o1, o2, o3, o4))
     collinear = (o1 == 0.0) & (o2 == 0.0)
-    return (o1 * o2 <= 0.0) & (o3 * o4 <= 0.0) & ~collinear
+    return (o1 * o2 <= 0.0) & (o3 * o4 < 0.0) & ~collinear
 
 
 def segment_clear_reference(mesh: Navmesh, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(N,) bool: segments p→q (shortened by SHORTEN_M at both ends) hit no boundary segment."""
+    """(N,) bool: segments p→q hit no boundary segment."""
     p, q = np.atleast_2d(p).astype(np.float64), np.atleast_2d(q).astype(np.float64)
-    d = q - p
-    n = np.linalg.norm(d, axis=1, keepdims=True)
-    s = np.minimum(SHORTEN_M, 0.5 * n)
-    u = d / np.maximum(n, 1e-300)
-    p2, q2 = p + u * s, q - u * s
-    hit = segments_blocked(p2[:, None], q2[:, None], mesh.seg_a[None], mesh.seg_b[None])
+    hit = segments_blocked(p[:, None], q[:, None], mesh.seg_a[None], mesh.seg_b[None])
     return ~hit.any(axis=1)
 
 

@@ -17,7 +17,8 @@ is a legal centre):
    an edge), connected components, reflex vertices of the boundary and the reduced visibility graph
    between them (bitangent, unobstructed pairs).
 
-Queries (Detour's statuses, exact lengths): nearest-point snapping, then the true shortest path within
+Queries (Detour's statuses, exact lengths): nearest-point snapping (a point off the mesh moves to the
+nearest boundary point, then ``NUDGE_M`` into its triangle), then the true shortest path within
 the mesh by A* over the reduced visibility graph (shortest paths in a polygonal domain bend only at
 reflex vertices, on bitangent edges), compiled with numba (:mod:`song.geometry._navmesh_kernel`; the
 numpy implementation it replaced is the reference twin in :mod:`song.geometry._navmesh_reference`).
@@ -26,6 +27,11 @@ Detour's own query (A* over triangles with edge-midpoint costs, then the funnel)
 obstacle. :meth:`Navmesh.distances` answers one source and many goals with one search. Nothing raises
 on a bad query: a :class:`PathResult` carries ``ok`` / ``partial`` / ``unreachable`` / ``off_mesh``
 and a reason.
+
+Boundary tolerance: one constant, ``TOUCH_EPS`` (1e-12 m², a cross product: about 1e-12 m off a 1 m
+wall), decides when a point counts as on a wall's line. A line of sight whose own end lies on a wall
+is not blocked by that wall (its ends are mesh points, so leaving the mesh there would mean crossing
+another wall), which keeps goals snapped onto, or a hair inside, a boundary edge reachable.
 """
 
 from __future__ import annotations
@@ -457,7 +463,7 @@ class Navmesh:
             _k.START_OFF: f"start is more than {max_snap} m from the mesh",
             _k.GOAL_OFF: f"goal is more than {max_snap} m from the mesh",
             _k.UNREACHABLE: "goal is on another part of the mesh",
-            _k.NO_PATH: "no path between start and goal",  # cannot happen within one mesh part
+            _k.NO_PATH: "no path between start and goal within one mesh part (a navmesh defect: please report it)",
         }[code]
         status = "off_mesh" if code in (_k.START_OFF, _k.GOAL_OFF) else "unreachable"
         return PathResult(status, np.zeros((0, 2)), float("inf"), reason)
@@ -523,7 +529,14 @@ def trace_legal(legal: np.ndarray, resolution: float, origin: tuple[float, float
             if len(contours[child]) >= 3:
                 holes.append(world(contours[child]))
             child = hierarchy[0][child][0]
-        polys.extend(_polygon_parts(shapely.make_valid(Polygon(world(contours[i]), holes))))
+        shape = Polygon(world(contours[i]), holes)
+        if not shape.is_valid:
+            # a hole touching its outer ring along an edge: make_valid of the whole polygon can keep the
+            # outer ring and drop the hole (a mesh over furniture), so subtract the holes instead
+            shape = shapely.make_valid(Polygon(world(contours[i])))
+            if holes:
+                shape = shape.difference(shapely.union_all([shapely.make_valid(Polygon(h)) for h in holes]))
+        polys.extend(_polygon_parts(shape))
     return polys
 
 
@@ -686,7 +699,37 @@ def build_navmesh(
     )
     traced = trace_legal(legal, resolution, origin)
     polys = simplify_polygons(traced, contour_error, min_area=resolution**2, margin=0.25 * resolution)
-    return navmesh_from_polygons(polys, params)
+    mesh = navmesh_from_polygons(polys, params)
+    check_on_legal_cells(mesh, legal, resolution, origin)
+    return mesh
+
+
+def check_on_legal_cells(mesh: Navmesh, legal: np.ndarray, resolution: float, origin: tuple[float, float]) -> None:
+    """Refuse a mesh that covers the centre of a cell where no agent may stand.
+
+    The build keeps the mesh boundary at least ¼ cell inside the legal cells' outer edges, so the
+    tolerance is zero cells: a covered illegal centre is a build defect (a lost hole puts the mesh
+    over furniture), never a rounding effect.
+
+    Raises:
+        StageError: with the number of covered cells, their area and the first one's position.
+    """
+    if not len(mesh.triangles):
+        return
+    rows = legal.shape[0]
+    r, c = np.nonzero(~legal)
+    centres = np.stack([origin[0] + (c + 0.5) * resolution, origin[1] + (rows - r - 0.5) * resolution], -1)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    near = np.flatnonzero(((centres >= lo) & (centres <= hi)).all(axis=1))
+    covered = near[mesh.locate(centres[near], tol=0.0) >= 0]
+    if len(covered):
+        from song.errors import StageError
+
+        x, y = centres[covered[0]]
+        raise StageError(
+            f"navmesh build: the mesh covers {len(covered)} occupied cell(s) "
+            f"({len(covered) * resolution**2:.2f} m²), the first at ({x:.2f}, {y:.2f}) m"
+        )
 
 
 def navmesh_arrays(mesh: Navmesh) -> dict[str, np.ndarray]:

@@ -161,3 +161,79 @@ def test_locate_and_snap_agree_with_brute_force() -> None:
     ok = stri >= 0
     assert mesh.contains(snapped[ok], tol=1e-9).all()
     assert (moved[ok] <= 0.2 + 1e-12).all() and (moved[~ok] == np.inf).all()
+
+
+BOUNDARY_DEPTHS = (0.0, 1e-12, 1e-10, 1e-9, 1e-8, 1e-7, 1e-6, 1e-5, 1e-4)
+
+
+def _inward_midpoints(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each boundary edge's midpoint, its unit normal into the mesh, and the mesh part it bounds."""
+    a, b = mesh.seg_a, mesh.seg_b
+    mid = 0.5 * (a + b)
+    d = b - a
+    normal = np.stack([-d[:, 1], d[:, 0]], -1) / np.linalg.norm(d, axis=1, keepdims=True)
+    probe = mesh.locate(mid + 1e-3 * normal, tol=0.0)
+    normal[probe < 0] *= -1
+    part = mesh.component[mesh.locate(mid + 1e-3 * normal, tol=0.0)]
+    return mid, normal, part
+
+
+@pytest.mark.parametrize("scene", sorted(p.name for p in SAMPLES.iterdir() if p.is_dir()))
+def test_goals_a_hair_inside_every_boundary_edge_are_reachable(scene):
+    """Snapping puts stops on or just inside a wall: every depth from 0 to 0.1 mm must still be reachable.
+
+    The start is the centroid of the edge's mesh part farthest from it; lengths at every depth agree
+    with each other (within the depth), and a sample agrees with the reference twin.
+    """
+    from song.datasets.scenes import load_scene_package
+    from song.pipeline.crowd.navmesh import scene_navmesh
+
+    mesh = scene_navmesh(load_scene_package(SAMPLES / scene), RADIUS, 0.1)
+    mid, normal, part = _inward_midpoints(mesh)
+    centroids = mesh.vertices[mesh.triangles].mean(axis=1)
+    failures = []
+    for s in range(len(mid)):
+        own = centroids[mesh.component == part[s]]
+        start = own[np.argmax(np.linalg.norm(own - mid[s], axis=1))]
+        lengths = []
+        for depth in BOUNDARY_DEPTHS:
+            res = mesh.find_path(start, mid[s] + depth * normal[s], allow_partial=False)
+            if res.status != "ok":
+                failures.append((s, depth, res.reason))
+            lengths.append(res.length)
+        if np.isfinite(lengths).all():
+            assert np.ptp(lengths) <= 2 * BOUNDARY_DEPTHS[-1] + 1e-9, (s, lengths)
+        if s % 16 == 0 and np.isfinite(lengths[3]):
+            ref = visibility_path_reference(mesh, start, mid[s] + BOUNDARY_DEPTHS[3] * normal[s])
+            assert ref is not None
+            assert lengths[3] == pytest.approx(float(np.linalg.norm(np.diff(ref, axis=0), axis=1).sum()), abs=1e-9)
+    assert not failures, f"{len(failures)} of {len(mid) * len(BOUNDARY_DEPTHS)} goals unreachable: {failures[:5]}"
+
+
+@pytest.mark.parametrize("seed", [18, 31, 48, 118, 141, 152, 176, 248, 296])
+def test_mesh_never_covers_an_occupied_cell(seed):
+    """Grids where a piece of furniture's hole touches its room's outline along an edge.
+
+    ``make_valid`` of such a contour kept the outline and dropped the hole: up to 10 m² of mesh lay
+    over furniture and paths went through it. The build now refuses any such mesh, so building is the test.
+    """
+    legal = erode(furnished_grid(seed), RES, RADIUS)
+    mesh = build_navmesh(legal, RES, (0.0, 0.0), RADIUS, EPS)
+    rows, _ = legal.shape
+    r, c = np.nonzero(~legal)
+    centres = np.stack([(c + 0.5) * RES, (rows - r - 0.5) * RES], -1)
+    assert (mesh.locate(centres, tol=0.0) < 0).all()
+    assert mesh.area == pytest.approx(sum(p.area for p in mesh_polygons(mesh)), rel=1e-9)
+
+
+def test_a_mesh_over_an_occupied_cell_is_refused():
+    from song.errors import StageError
+    from song.geometry.navmesh import check_on_legal_cells
+
+    legal = erode(furnished_grid(3), RES, RADIUS)
+    mesh = build_navmesh(legal, RES, (0.0, 0.0), RADIUS, EPS)
+    r, c = np.argwhere(legal)[len(np.argwhere(legal)) // 2]
+    blocked = legal.copy()
+    blocked[r, c] = False  # a cell the mesh covers becomes occupied after the build
+    with pytest.raises(StageError, match="covers 1 occupied cell"):
+        check_on_legal_cells(mesh, blocked, RES, (0.0, 0.0))

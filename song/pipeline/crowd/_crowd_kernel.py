@@ -110,7 +110,7 @@ def _on_mesh(x, y, tol, va, vb, verts, tris, tgrid, tstart, titems):  # pragma: 
 @numba.njit(cache=True, nogil=True)
 def _constrain(px, py, qx, qy, stamp, tick, va, vb, verts, tris, seg_tri, hgrid, hstart, hitems):  # pragma: no cover
     """One move p→q kept on the mesh (``Navmesh.constrain_moves``)."""
-    if _nk._ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick, 0.0):
+    if _nk._ray_clear(px, py, qx, qy, va, vb, verts, hgrid, hstart, hitems, stamp, tick, False):
         return qx, qy
     cx, cy, _, k = _nk._nearest_wall(qx, qy, va, vb, verts, -1, np.zeros(0, dtype=np.int64))
     return _nk._nudge(cx, cy, k, verts, tris, seg_tri)
@@ -157,7 +157,7 @@ def _move(px, py, qx, qy, limit, stamp, tick, mesh):  # pragma: no cover
         return x, y, tick
     sx, sy = px + (x - px) * limit / size, py + (y - py) * limit / size
     tick += 1
-    clear = _nk._ray_clear(px, py, sx, sy, va, vb, verts, hgrid, hstart, hitems, stamp, tick)
+    clear = _nk._ray_clear(px, py, sx, sy, va, vb, verts, hgrid, hstart, hitems, stamp, tick, False, _nk.SHORTEN_M)
     if clear and _on_mesh(sx, sy, 1e-9, va, vb, verts, tris, tgrid, tstart, titems):  # may end on an edge
         return sx, sy, tick
     return px, py, tick
