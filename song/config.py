@@ -227,6 +227,21 @@ def config_value(config: BaseModel, key: str) -> Any:
     return value.model_dump(mode="json") if isinstance(value, BaseModel) else value
 
 
+def config_differences(old: BaseModel, new: BaseModel) -> list[tuple[str, Any, Any]]:
+    """``(dotted key, old value, new value)`` for every leaf setting that differs, sorted by key."""
+
+    def leaves(data: Any, prefix: str = "") -> dict[str, Any]:
+        if isinstance(data, dict):
+            out: dict[str, Any] = {}
+            for key, value in data.items():
+                out.update(leaves(value, f"{prefix}{key}."))
+            return out
+        return {prefix[:-1]: data}
+
+    a, b = leaves(old.model_dump(mode="json")), leaves(new.model_dump(mode="json"))
+    return [(k, a.get(k), b.get(k)) for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+
+
 def config_hash(config: BaseModel) -> str:
     """sha256 of a config's canonical JSON; written into every output that the config shaped."""
     from song.util import sha256_json  # numpy and friends: not needed to read a config

@@ -115,6 +115,27 @@ def _print_summary(summary: RunSummary, wall: float, out: Path, quiet: bool, fps
     )
 
 
+def _refuse_changed_settings(out: Path, cfg: SongConfig) -> None:
+    """Stop (one line) when the run folder records other settings than ``cfg``: a resume never reverts them."""
+    from song.config import config_differences
+    from song.datasets.run import read_run_info
+    from song.datasets.run.layout import RUN_FILE
+
+    if not (out / RUN_FILE).is_file():
+        return
+    recorded = read_run_info(out).config
+    changes = config_differences(recorded, cfg)
+    if changes:
+        shown = ", ".join(
+            f"{key}={json.dumps(old)} (this run would use {json.dumps(new)})" for key, old, new in changes
+        )
+        sets = " ".join(f"--set {key}={json.dumps(old)}" for key, old, _ in changes[:3])
+        raise SongError(
+            f"{out / RUN_FILE}: the run was made with {shown}; pass the same settings ({sets}) "
+            "or --replace-settings to re-run with the new ones"
+        )
+
+
 @app.command("synth")
 @handle_errors
 def synth(
@@ -128,12 +149,22 @@ def synth(
     scheduler: str | None = typer.Option(None, "--scheduler", help="dask scheduler, e.g. tcp://host:8786"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="JSON line per scene instead of progress bars"),
     stages: str | None = typer.Option(None, "--stages", help="comma-separated subset of stages (default: all)"),
+    replace_settings: bool = typer.Option(
+        False, "--replace-settings", help="re-run an existing run with settings other than the ones it records"
+    ),
 ) -> None:
-    """Run every registered per-scene stage on every scene package (resumable, parallel)."""
+    """Run every registered per-scene stage on every scene package (resumable, parallel).
+
+    Re-running into an existing run folder resumes it. When the settings differ from the ones the run
+    records (e.g. after ``song rerun ... --set``), it names them and stops: give the same ``--set``
+    again, or ``--replace-settings`` to re-run with the new ones.
+    """
     from song.parallel import default_workers
     from song.pipeline.chain import load_stages
 
     cfg = make_config(config, seed, sets)
+    if not replace_settings:
+        _refuse_changed_settings(out, cfg)
     names = [name.strip() for name in stages.split(",")] if stages else None
     if out.exists() and not out.is_dir():
         raise SongError(f"--out {out} is a file: give a folder for the run")

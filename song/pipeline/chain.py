@@ -32,6 +32,7 @@ import numpy as np
 import song
 from song.config import SongConfig, config_hash, config_value
 from song.datasets.run import RunFolder, RunInfo, SceneFolder, read_run_info, write_run_info
+from song.datasets.run.integrity import outputs_digest, stage_settings
 from song.datasets.scenes import ScenePackage, find_scene_packages, load_scene_package
 from song.errors import SongError, StageError
 from song.parallel import ExecutorName, parallel_map
@@ -229,6 +230,24 @@ def stage_input_hash(stage: Stage, scene: ScenePackage, config: SongConfig, reco
     )
 
 
+def _made_from(stage: Stage, config: SongConfig, record: dict[str, Any], scene_files: dict) -> dict[str, Any]:
+    """What a stage record keeps of its inputs, for staleness checks (:mod:`song.datasets.run.integrity`)."""
+    return {
+        "scene": scene_files,
+        "settings": stage_settings(config, stage.reads),
+        "depends": {dep: outputs_digest(record.get(dep, {})) for dep in sorted(stage.depends)},
+    }
+
+
+def downstream(stage_name: str) -> list[str]:
+    """``stage_name`` and every registered stage made (directly or not) from its outputs, in run order."""
+    names = {stage_name}
+    for stage in load_stages():
+        if names & set(stage.depends):
+            names.add(stage.name)
+    return [stage.name for stage in load_stages() if stage.name in names]
+
+
 def _run_stage(stage: Stage, ctx: StageContext) -> StageOutput:
     output = stage.run(ctx)
     return output if isinstance(output, StageOutput) else StageOutput(list(output))
@@ -262,8 +281,9 @@ def run_scene(
         ):
             result.stages[stage.name] = "skipped"
             result.totals.update(previous.get("totals", {}))
-            if previous.get("scene") != scene_files:  # a run from before scene hashes were recorded
-                previous["scene"] = scene_files  # the input hash matched, so these are the files it read
+            made_from = _made_from(stage, config, record, scene_files)
+            if any(previous.get(key) != value for key, value in made_from.items()):  # a run from an older song
+                previous.update(made_from)  # the input hash matched, so these are what it was made from
                 write_json_atomic(folder.stages, record)
             continue
         ctx = StageContext(scene=scene, scene_dir=folder.root, run_dir=run_dir, config=config, stage=stage.name)
@@ -288,7 +308,8 @@ def run_scene(
         seconds = time.perf_counter() - start
         outputs = {rel: sha256_file(folder.path(rel)) for rel in sorted(output.files)}
         # Timings are kept out of stages.json so that run folders are byte-identical across runs.
-        record[stage.name] = {"status": "ok", "input_hash": input_hash, "outputs": outputs, "scene": scene_files}
+        record[stage.name] = {"status": "ok", "input_hash": input_hash, "outputs": outputs}
+        record[stage.name].update(_made_from(stage, config, record, scene_files))
         if output.totals:
             record[stage.name]["totals"] = dict(sorted(output.totals.items()))
         write_json_atomic(folder.stages, record)

@@ -172,10 +172,9 @@ def _inward_midpoints(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     mid = 0.5 * (a + b)
     d = b - a
     normal = np.stack([-d[:, 1], d[:, 0]], -1) / np.linalg.norm(d, axis=1, keepdims=True)
-    probe = mesh.locate(mid + 1e-3 * normal, tol=0.0)
-    normal[probe < 0] *= -1
-    part = mesh.component[mesh.locate(mid + 1e-3 * normal, tol=0.0)]
-    return mid, normal, part
+    centroid = mesh.vertices[mesh.triangles[mesh.seg_triangle]].mean(axis=1)  # the edge's own triangle
+    normal[((centroid - mid) * normal).sum(axis=1) < 0] *= -1
+    return mid, normal, mesh.component[mesh.seg_triangle]
 
 
 @pytest.mark.parametrize("scene", sorted(p.name for p in SAMPLES.iterdir() if p.is_dir()))

@@ -36,7 +36,7 @@ from song.datasets.bench.schema import (
     SCENES_PATH,
 )
 from song.datasets.run import RunFolder, RunInfo, read_bindings, read_crowd_table, read_intents, read_run_info
-from song.datasets.run.integrity import check_scene_unchanged
+from song.datasets.run.integrity import check_fresh, check_scene_unchanged, graded_inputs
 from song.datasets.run.layout import AMASS_FILE, MOTION_META_FILE
 from song.datasets.scenes.package import GAUSSIANS, SEMANTIC_MAP, USD_PROXY, load_scene_package
 from song.errors import BenchmarkError, SongError
@@ -72,6 +72,26 @@ def _run_inputs(run: RunFolder) -> RunInfo:
         return read_run_info(run.root)
     except SongError as exc:
         raise BenchmarkError(str(exc)) from exc
+
+
+def _check_graded_inputs(run: RunFolder, run_info: RunInfo, scene_ids: list[str]) -> None:
+    """Refuse stale stages, edited scenes, and episodes graded from other stage outputs than today's.
+
+    Raises:
+        StageError: a scene's stage is stale or its package changed (run ``song synth``).
+        BenchmarkError: a scene's stages re-ran after the grade (run ``song grade``).
+    """
+    graded = read_json_object(run.grading_summary).get("inputs", {})
+    fix = f"run `song synth --scenes {run_info.scenes_dir} --out {run.root}` and `song grade --run {run.root}`"
+    for scene_id in scene_ids:
+        folder = run.scene(scene_id)
+        check_fresh(folder, run_info.config, fix)
+        check_scene_unchanged(folder, run_info.scenes_dir / scene_id)
+        if not isinstance(graded, dict) or graded.get(scene_id) != graded_inputs(folder):
+            raise BenchmarkError(
+                f"{run.episodes_manifest}: the episodes of scene '{scene_id}' were graded from other stage "
+                f"outputs than the run has now; run `song grade --run {run.root}` again"
+            )
 
 
 def _episode_table(run: RunFolder, config_sha: str, goal_radius: float) -> pa.Table:
@@ -293,8 +313,8 @@ def export_bench(
         pedestrians = _pedestrian_table(run, scene_ids)
         avatar_rows, scene_rows = [], []
         ped_ids = _ped_ids_by_scene(pedestrians)
+        _check_graded_inputs(run, run_info, scene_ids)
         for scene_id in scene_ids:
-            check_scene_unchanged(run.scene(scene_id), run_info.scenes_dir / scene_id)
             avatar_rows += _avatar_rows(run, scene_id, ped_ids.get(scene_id, []), blobs, amass)
             scene_rows.append(_scene_row(run_info.scenes_dir, scene_id, blobs))
         tables = {

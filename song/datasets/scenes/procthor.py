@@ -7,12 +7,31 @@ view shows x right, z up; ours shows X right, Y up). Unity yaw ψ turns +z towar
 above); in our frame an object's forward axis is (sin ψ, cos ψ) and its right axis (cos ψ, −sin ψ).
 
 Walls are zero-thickness planes (an interior wall appears once per side); they become occupied strips
-``wall_thickness_m`` thick centred on the plane. Door holes (``holePolygon``, wall-local x = distance
-from the wall's first end) are cut back open across the strip so rooms connect. Floor objects (bottom
+``wall_thickness_m`` thick centred on the plane. A wall marked ``"empty": true`` is an open-plan
+connection (ProcTHOR opens the whole boundary between, e.g., a kitchen and a living room that way): it
+has no geometry in AI2-THOR, so it is not drawn at all and people walk through it.
+
+A door or window's ``holePolygon`` is in the local frame of its ``wall0``: x is the distance along the
+wall from the **first corner of that wall's polygon** toward its second, y the height. That is how
+ProcTHOR places them (``allenai/procthor``, ``procthor/generation/doors.py``: ``ProceduralFrame.polygon``
+measures the door from the wall's maximum corner when the polygon's first corner is the larger one) and
+how AI2-THOR cuts the hole in the wall mesh it builds from that polygon. The two sides of an interior
+wall run in opposite directions, so measuring from the wall id's (sorted) corners mirrors the hole
+whenever ``wall0``'s polygon runs from its larger corner. Door holes are cut back open across the
+strip so rooms connect; window holes do not touch the floor plan (they sit above a sill). Floor objects (bottom
 within 0.15 m of the floor) get footprints from ProcTHOR's asset database (the ``procthor`` package's
 ``databases/asset-database.json``, or a file the user names); wall-mounted and small objects on
 furniture are skipped, and objects whose asset is missing from the database are counted and reported
 per house (never silently). Everything outside the rooms is occupied.
+
+Fields read: ``rooms[].id/roomType/floorPolygon/floorMaterial``; ``walls[].id/polygon/empty/material``
+(the polygon's first two corners give the wall's ends and direction; the id's corners only when the
+polygon is missing); ``doors[].id/wall0/wall1/holePolygon``; ``objects[].assetId/position/rotation.y``.
+Deliberately ignored: ``windows[]`` (no effect on the floor plan; the dressing draws no window holes),
+an object's ``rotation.x/z`` (ProcTHOR's floor objects stand upright), ``kinematic`` (every floor
+object is an obstacle), ``children[]`` (objects on other objects: not floor obstacles), ``openness``
+(a door is always passable, as a pedestrian opens it), ``room0/room1`` (the hole's wall says where it is),
+lights, skybox and ``metadata``.
 
 The importer also dresses the house (:mod:`song.datasets.scenes.splat`): its doors become openings
 (lintels above the hole), its rooms' floor materials and wall paint map to ours, its wall height is
@@ -194,10 +213,47 @@ def _room_polygons(house: dict) -> dict[str, np.ndarray]:
     }
 
 
-def _wall_ends(wall_id: str) -> tuple[np.ndarray, np.ndarray]:
-    parts = wall_id.split("|")
+def _wall_ends(wall: dict) -> tuple[np.ndarray, np.ndarray]:
+    """A wall's two ends (our x, y) in the order of its polygon: its hole coordinates start at the first.
+
+    ProcTHOR writes a wall's polygon as its two floor corners, then the same two at the top; a wall
+    without a polygon falls back to the corners in its id (``wall|room|x0|z0|x1|z1``, sorted, 2 decimals).
+    """
+    poly = wall.get("polygon") or []
+    if len(poly) >= 2:
+        floor = min(float(p.get("y", 0.0)) for p in poly)
+        ends = [np.array([float(p["x"]), float(p["z"])]) for p in poly if float(p.get("y", 0.0)) <= floor + 1e-6]
+        if len(ends) >= 2 and np.linalg.norm(ends[1] - ends[0]) > 1e-9:
+            return ends[0], ends[1]
+    parts = str(wall["id"]).split("|")
     x0, z0, x1, z1 = (float(v) for v in parts[-4:])
     return np.array([x0, z0]), np.array([x1, z1])
+
+
+def _hole_segments(house: dict, key: str) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """``(id, a, b, top)`` for each door or window (``key``): its hole's ends along its wall, its top (m).
+
+    The hole's x runs along ``wall0`` from the first corner of its polygon (see the module docstring);
+    a hole whose ``wall0`` is not among the walls is measured along ``wall1`` from its far end.
+    """
+    walls = {w.get("id"): w for w in house.get("walls", []) if isinstance(w, dict)}
+    out, seen = [], set()
+    for item in house.get(key, []):
+        hole = item.get("holePolygon") or []
+        if len(hole) < 2 or item.get("id") in seen:
+            continue
+        seen.add(item.get("id"))
+        if item.get("wall0") in walls:
+            a, b = _wall_ends(walls[item["wall0"]])
+        elif item.get("wall1") in walls:
+            b, a = _wall_ends(walls[item["wall1"]])
+        else:
+            continue
+        direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
+        lo, hi = sorted((float(hole[0]["x"]), float(hole[1]["x"])))
+        top = max(float(hole[0].get("y", 2.1)), float(hole[1].get("y", 2.1)))
+        out.append((str(item.get("id")), a + direction * lo, a + direction * hi, top))
+    return out
 
 
 @dataclass(frozen=True)
@@ -221,19 +277,7 @@ def _rgb_hex(colour: dict) -> str:
 
 def _hints(house: dict, room_ids: dict[str, str], wall: float) -> DressingHints:
     """Openings from the doors, floor materials per room, the most common wall paint, the wall height."""
-    openings = []
-    seen = set()
-    for door in house.get("doors", []):
-        wall_id = door.get("wall0") or door.get("wall1")
-        hole = door.get("holePolygon") or []
-        if not wall_id or len(hole) < 2 or door.get("id") in seen:
-            continue
-        seen.add(door.get("id"))
-        a, b = _wall_ends(wall_id)
-        direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
-        lo, hi = sorted((float(hole[0]["x"]), float(hole[1]["x"])))
-        top = max(float(hole[0].get("y", 2.1)), float(hole[1].get("y", 2.1)))
-        openings.append(Opening(tuple(a + direction * lo), tuple(a + direction * hi), top, wall))
+    openings = [Opening(tuple(a), tuple(b), top, wall) for _, a, b, top in _hole_segments(house, "doors")]
     floors = {
         room_ids[room["id"]]: procthor_floor_material(room.get("floorMaterial", {}).get("name", ""))
         for room in house.get("rooms", [])
@@ -271,20 +315,13 @@ def convert_house(
     raster = Rasterizer(tuple(lo), tuple(hi), resolution, fill=0)
     for poly in rooms.values():
         raster.polygon(poly, 255)
-    doors = {}
-    for door in house.get("doors", []):
-        for key in ("wall0", "wall1"):
-            if door.get(key):
-                hole = door["holePolygon"]
-                doors.setdefault(door[key], []).append((hole[0]["x"], hole[1]["x"]))
     for wall_def in house.get("walls", []):
-        a, b = _wall_ends(wall_def["id"])
+        if wall_def.get("empty") is True:  # an open-plan connection: no geometry in AI2-THOR
+            continue
+        a, b = _wall_ends(wall_def)
         raster.segment(a, b, wall, 0)
-    for wall_id, holes in doors.items():
-        a, b = _wall_ends(wall_id)
-        direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
-        for x_lo, x_hi in holes:
-            raster.segment(a + direction * x_lo, a + direction * x_hi, wall + 2 * resolution, 255, caps=False)
+    for _, a, b, _ in _hole_segments(house, "doors"):
+        raster.segment(a, b, wall + 2 * resolution, 255, caps=False)
     regions = []
     room_ids = {}
     for index, room in enumerate(house["rooms"]):

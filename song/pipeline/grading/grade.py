@@ -15,6 +15,7 @@ import pyarrow.parquet as pq
 from song.config import GradingConfig, SongConfig
 from song.datasets.bench.schema import DIFFICULTIES, MODES
 from song.datasets.run import RunFolder, read_crowd, read_run_info
+from song.datasets.run.integrity import check_fresh, check_scene_unchanged, graded_inputs
 from song.datasets.run.layout import CROWD_FILE
 from song.datasets.scenes import load_scene_package
 from song.parallel import parallel_map
@@ -228,6 +229,10 @@ def grade_run(
     total = n_episodes or config.grading.n_episodes
     splits = splits or {"test": 1.0}
     scene_ids = run.scene_ids(having=CROWD_FILE)
+    fix = f"run `song synth --scenes {run_info.scenes_dir} --out {run.root}` first (it resumes)"
+    for scene_id in scene_ids:  # never grade a crowd made from other inputs than the run's
+        check_fresh(run.scene(scene_id), run_info.config, fix)
+        check_scene_unchanged(run.scene(scene_id), run_info.scenes_dir / scene_id)
     by_split = {name: [s for s in scene_ids if scene_split(s, splits) == name] for name in splits}
     rows, infeasible, binning = [], {}, {}
     for name, ids in by_split.items():
@@ -242,6 +247,7 @@ def grade_run(
         "bins": binning,  # per split, per factor
         "splits": {name: {"scenes": len(ids), "episodes": sum(r["split"] == name for r in rows)}
                    for name, ids in by_split.items()},
+        "inputs": {scene_id: graded_inputs(run.scene(scene_id)) for scene_id in scene_ids},
     }  # fmt: skip
     buffer = io.BytesIO()
     pq.write_table(table, buffer, compression="zstd", compression_level=9)

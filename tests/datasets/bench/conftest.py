@@ -15,6 +15,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from song.config import SongConfig
+from song.datasets.run import RunFolder
+from song.datasets.run.integrity import graded_inputs, stage_settings
 from song.datasets.scenes import load_scene_package
 from song.pipeline.chain import iter_run
 from song.util import sha256_file, write_json_atomic
@@ -54,7 +56,8 @@ def build_graded_run(root: Path, n_scenes: int = 2, episodes_per_scene: int = 5,
         # what a completed crowd stage records: its outputs and the scene files it read
         files = load_scene_package(scenes / f"scene_{k}").content_hash()
         outputs = {"crowd.parquet": sha256_file(run / "scenes" / f"scene_{k}" / "crowd.parquet")}
-        record = {"crowd": {"status": "ok", "input_hash": "synthetic", "outputs": outputs, "scene": files}}
+        made_from = {"scene": files, "settings": stage_settings(SongConfig(), ()), "depends": {}}
+        record = {"crowd": {"status": "ok", "input_hash": "synthetic", "outputs": outputs, **made_from}}
         write_json_atomic(run / "scenes" / f"scene_{k}" / "stages.json", record)
         for e in range(episodes_per_scene):
             length = 3.0 + e + shift
@@ -90,6 +93,8 @@ def build_graded_run(root: Path, n_scenes: int = 2, episodes_per_scene: int = 5,
             )
     (run / "manifest").mkdir()
     pq.write_table(pa.Table.from_pylist(rows), run / "manifest" / "episodes.parquet")
+    inputs = {f"scene_{k}": graded_inputs(RunFolder(run).scene(f"scene_{k}")) for k in range(n_scenes)}
+    write_json_atomic(run / "manifest" / "summary.json", {"inputs": inputs})  # what a grade records of its inputs
     return run
 
 

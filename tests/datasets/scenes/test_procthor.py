@@ -143,3 +143,62 @@ def test_house_without_objects_goes_through_every_stage(tmp_path: Path) -> None:
     assert scene.status == "ok", scene.error
     intents = read_intents(tmp_path / "run" / "scenes" / result.scene_id)
     assert intents.intents == [] and "object" in intents.notes[0]
+
+
+# ---- houses written by our own code from the schema (tests/datasets/scenes/procthor_factory.py) ----
+def _import_own(tmp_path: Path, open_plan: bool = True, splat: bool = False) -> Path:
+    from tests.datasets.scenes.procthor_factory import write_house
+
+    house, table = write_house(tmp_path / "houses", open_plan=open_plan)
+    results = import_procthor(house, tmp_path / "scenes", assets=table, splat=splat)
+    assert [r.error for r in results] == [""]
+    return results[0].path
+
+
+def _free_along(package, a, b, n: int = 40) -> np.ndarray:
+    """Whether the occupancy cells along the segment a→b (our x, y) are free."""
+    pts = np.linspace(a, b, n)
+    rc = package.occupancy.to_cell(pts)
+    return package.occupancy.free[rc[:, 0], rc[:, 1]]
+
+
+def test_empty_walls_are_open_plan_connections(tmp_path: Path) -> None:
+    from song.datasets.scenes.dressing import DressingHints, build_dressing
+
+    package = load_scene_package(_import_own(tmp_path))
+    assert _free_along(package, (4.0, 0.2), (4.0, 3.8)).all()  # the kitchen–living-room boundary is open
+    assert not _free_along(package, (0.2, 4.0), (3.8, 4.0)).any()  # the kitchen–bedroom wall stays
+    walls = build_dressing(package.semantic_map, package.occupancy, DressingHints()).walls
+    from shapely.geometry import LineString
+
+    boundary = LineString([(4.0, 0.3), (4.0, 3.7)])
+    assert not any(w.intersects(boundary) for w in walls)  # no wall geometry (USD or Gaussians) there
+    closed = load_scene_package(_import_own(tmp_path / "closed", open_plan=False))
+    assert not _free_along(closed, (4.0, 0.6), (4.0, 3.4)).any()
+
+
+def test_door_holes_are_measured_from_the_first_corner_of_wall0s_polygon(tmp_path: Path) -> None:
+    from song.datasets.scenes.procthor import _hints
+    from tests.datasets.scenes.procthor_factory import open_plan_house
+
+    package = load_scene_package(_import_own(tmp_path))
+    assert _free_along(package, (6.8, 4.0), (7.6, 4.0)).all()  # 0.3–1.3 m from (8, 4) toward (4, 4)
+    assert not _free_along(package, (4.4, 4.0), (5.2, 4.0)).any()  # not mirrored onto the dresser
+    openings = _hints(open_plan_house(), {}, 0.1).openings
+    ends = sorted(sorted(map(tuple, np.round([o.a, o.b], 6))) for o in openings)
+    assert ends == [[(2.0, 0.0), (3.0, 0.0)], [(6.7, 4.0), (7.7, 4.0)]]
+
+
+@pytest.mark.parametrize("open_plan", [True, False])
+def test_scenes_check_finds_every_object_the_house_makes_reachable(tmp_path: Path, open_plan: bool) -> None:
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    root = _import_own(tmp_path, open_plan=open_plan)
+    result = CliRunner().invoke(app, ["scenes", "check", str(root)])
+    assert result.exit_code == 0, result.output
+    if open_plan:
+        assert "cannot be reached" not in result.output, result.output
+    else:  # walled off, the kitchen's only door is to the outside: its objects are cut off, as the JSON says
+        assert "cannot be reached" in result.output and "fridge_1" in result.output
