@@ -57,6 +57,10 @@ T_JUNCTION_M = 1e-9  # a vertex this close to the inside of a triangle edge spli
 PathStatus = Literal["ok", "partial", "unreachable", "off_mesh"]
 
 
+class NavmeshBuildError(ValueError):
+    """The build produced a mesh that breaks an invariant (it is never returned)."""
+
+
 @dataclass(frozen=True)
 class NavmeshParams:
     """Build parameters, stored with the mesh.
@@ -712,7 +716,7 @@ def check_on_legal_cells(mesh: Navmesh, legal: np.ndarray, resolution: float, or
     over furniture), never a rounding effect.
 
     Raises:
-        StageError: with the number of covered cells, their area and the first one's position.
+        NavmeshBuildError: with the number of covered cells, their area and the first one's position.
     """
     if not len(mesh.triangles):
         return
@@ -723,10 +727,8 @@ def check_on_legal_cells(mesh: Navmesh, legal: np.ndarray, resolution: float, or
     near = np.flatnonzero(((centres >= lo) & (centres <= hi)).all(axis=1))
     covered = near[mesh.locate(centres[near], tol=0.0) >= 0]
     if len(covered):
-        from song.errors import StageError
-
         x, y = centres[covered[0]]
-        raise StageError(
+        raise NavmeshBuildError(
             f"navmesh build: the mesh covers {len(covered)} occupied cell(s) "
             f"({len(covered) * resolution**2:.2f} m²), the first at ({x:.2f}, {y:.2f}) m"
         )

@@ -67,3 +67,43 @@ def test_grading_means_something(tmp_path: Path) -> None:
     assert rows["social"]["easy"]["SR"] > rows["straight"]["easy"]["SR"]
     for name, row in rows.items():
         assert row["easy"]["SR"] >= row["hard"]["SR"], name
+
+
+def test_an_open_plan_procthor_house_from_import_to_scores(tmp_path: Path) -> None:
+    """What a new user does with a ProcTHOR house: import, check, synth, grade, export, eval.
+
+    The house (written by our code from the schema) opens its kitchen onto the living room through
+    ``"empty"`` walls and has a door on a wall that runs from its larger corner: every room must be
+    reachable, and pedestrians and episodes must use all of it.
+    """
+    import json
+
+    from tests.datasets.scenes.procthor_factory import write_house
+
+    house, table = write_house(tmp_path / "houses")
+    runner = CliRunner()
+
+    def cli(*args: object) -> str:
+        result = runner.invoke(app, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+        return result.output
+
+    scenes, run, bench, out = tmp_path / "scenes", tmp_path / "run", tmp_path / "bench", tmp_path / "eval"
+    cli("scenes", "import", "procthor", house, "--assets", table, "--no-splat", "--out", scenes)
+    assert "cannot be reached" not in cli("scenes", "check", scenes)
+    cli("synth", "--scenes", scenes, "--out", run, "-j", "1")
+    folder = run / "scenes" / "procthor_house_open"
+    intents = json.loads((folder / "intents.json").read_text())
+    assert not [r for r in intents["rejected"] if r["reason"] == "unreachable"], intents["rejected"]
+    visited = {leg["goal_object"] for i in intents["intents"] for leg in i["legs"]}
+    visited |= {i["start_object"] for i in intents["intents"]}
+    rooms = {"fridge_1": "kitchen", "counter_top_1": "kitchen", "sofa_1": "living", "tv_stand_1": "living"}
+    rooms |= {"bed_1": "bedroom", "dresser_1": "bedroom"}
+    assert {rooms[o] for o in visited} == {"kitchen", "living", "bedroom"}  # routines cross the whole house
+    status = json.loads((folder / "crowd_status.json").read_text())
+    assert status and all(v["status"] == "arrived" for v in status.values()), status
+    cli("grade", "--run", run, "--episodes", "8")
+    cli("export-bench", "--run", run, "--bench", bench, "--version", "1.0.0")
+    cli("eval", "--bench", bench, "--policy", "astar", "--out", out, "-j", "1")
+    results = json.loads((out / "astar.json").read_text())
+    assert results["official"] and "| astar | all | 8 |" in (out / "results.md").read_text()

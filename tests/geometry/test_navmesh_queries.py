@@ -226,13 +226,12 @@ def test_mesh_never_covers_an_occupied_cell(seed):
 
 
 def test_a_mesh_over_an_occupied_cell_is_refused():
-    from song.errors import StageError
-    from song.geometry.navmesh import check_on_legal_cells
+    from song.geometry.navmesh import NavmeshBuildError, check_on_legal_cells
 
     legal = erode(furnished_grid(3), RES, RADIUS)
     mesh = build_navmesh(legal, RES, (0.0, 0.0), RADIUS, EPS)
     r, c = np.argwhere(legal)[len(np.argwhere(legal)) // 2]
     blocked = legal.copy()
     blocked[r, c] = False  # a cell the mesh covers becomes occupied after the build
-    with pytest.raises(StageError, match="covers 1 occupied cell"):
+    with pytest.raises(NavmeshBuildError, match="covers 1 occupied cell"):
         check_on_legal_cells(mesh, blocked, RES, (0.0, 0.0))

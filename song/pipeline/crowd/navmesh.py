@@ -14,9 +14,9 @@ import numpy as np
 
 from song.datasets.run.layout import NAVMESH_FILE
 from song.datasets.scenes import ScenePackage
-from song.errors import FormatError
+from song.errors import FormatError, StageError
 from song.geometry.freespace import erode
-from song.geometry.navmesh import Navmesh, build_navmesh, navmesh_arrays, navmesh_from_arrays
+from song.geometry.navmesh import Navmesh, NavmeshBuildError, build_navmesh, navmesh_arrays, navmesh_from_arrays
 from song.util import write_npz_atomic
 
 
@@ -30,7 +30,10 @@ def scene_navmesh(package: ScenePackage, radius: float, contour_error: float) ->
     """The navmesh of a scene's legal centres at ``radius`` (m), simplified within ``contour_error`` (m)."""
     grid = package.occupancy
     legal = legal_centres(package, radius)
-    return build_navmesh(legal, grid.resolution, grid.origin, radius, contour_error)
+    try:
+        return build_navmesh(legal, grid.resolution, grid.origin, radius, contour_error)
+    except NavmeshBuildError as exc:
+        raise StageError(f"{package.root}: {exc}") from None
 
 
 def save_navmesh(path: str | Path, mesh: Navmesh) -> None:

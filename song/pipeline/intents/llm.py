@@ -36,6 +36,13 @@ class LLMError(SongError):
     """The LLM could not produce a valid answer (after retries and one repair)."""
 
 
+class LLMRefusal(LLMError):
+    """The service refused or blocked the request (a safety block, a refusal, a content filter).
+
+    Recorded as such; never repaired or retried (the same prompt would be refused again).
+    """
+
+
 class TransientLLMError(LLMError):
     """A failure worth retrying: 408/429/5xx, a time-out, a refused or dropped connection.
 
@@ -125,7 +132,27 @@ class GeminiClient:
             raise LLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}")) from None
         except Exception as exc:  # time-outs, refused or dropped connections (httpx errors): all transient
             raise TransientLLMError(scrub(f"gemini request failed: {type(exc).__name__}: {exc}")) from None
-        return response.text or ""
+        text = response.text
+        if not text:
+            _gemini_refusal(response)
+        return text or ""
+
+
+def _name(value: object) -> str:
+    return str(getattr(value, "name", value))
+
+
+def _gemini_refusal(response: object) -> None:
+    """Raise :class:`LLMRefusal` for an empty Gemini reply that says why (blocked prompt, stopped reply)."""
+    feedback = getattr(response, "prompt_feedback", None)
+    block = getattr(feedback, "block_reason", None)
+    if block:
+        detail = getattr(feedback, "block_reason_message", None)
+        raise LLMRefusal(scrub(f"gemini blocked the prompt: {_name(block)}" + (f" ({detail})" if detail else "")))
+    candidates = getattr(response, "candidates", None) or []
+    reason = _name(getattr(candidates[0], "finish_reason", "")) if candidates else ""
+    if reason and reason not in ("STOP", "FINISH_REASON_UNSPECIFIED"):
+        raise LLMRefusal(f"gemini stopped the reply without content: finish reason {reason}")
 
 
 class OpenAICompatibleClient:
@@ -186,9 +213,16 @@ class OpenAICompatibleClient:
         except openai.OpenAIError as exc:
             raise LLMError(scrub(f"openai-compatible request failed: {type(exc).__name__}: {exc}")) from None
         try:
-            return reply.choices[0].message.content or ""
+            choice = reply.choices[0]
+            message = choice.message
         except (AttributeError, IndexError, TypeError) as exc:
             raise LLMError(f"openai-compatible reply has no message content: {exc}") from None
+        refusal = getattr(message, "refusal", None)
+        if refusal:
+            raise LLMRefusal(scrub(f"openai-compatible model refused: {refusal}"))
+        if not message.content and getattr(choice, "finish_reason", None) == "content_filter":
+            raise LLMRefusal("openai-compatible reply withheld by the server's content filter")
+        return message.content or ""
 
 
 def _slot(limit: int) -> threading.BoundedSemaphore:

@@ -24,9 +24,10 @@ or the Hugging Face cache with ``LOCAL_CACHE=true``); nothing is ever downloaded
   (the prompt repeated over near-equal segments, stitched by Kimodo's transitions). Kimodo generates
   every segment after the first with 5 + 10 % of the previous segment's frames of transition in
   front, so segments are planned so that each generated window stays within the limit
-  (:func:`plan_segments`). Constraint frame indices are CPU tensors, as Kimodo's own CLI builds them
-  (its post-processing indexes CPU tensors with them), and the denoising steps are capped at the
-  model's base step count (more would index past its schedule).
+  (:func:`plan_segments`). Constraints are built by Kimodo's ``Root2DConstraintSet.from_dict``: frame
+  indices on the CPU (its post-processing indexes CPU tensors with them), data on the model's device
+  (its conditioning indexes the data with the indices moved there); the denoising steps are capped at
+  the model's base step count (more would index past its schedule).
 - **Retargeting**: SOMA's neutral pose is a T-pose facing +Z like ours facing +x, and Kimodo's global
   rotations are relative to it, so each of our 24 joints copies the global rotation of its mapped SOMA
   joint (conjugated into our frame); the pelvis height is scaled by the ratio of rest pelvis heights.
@@ -143,6 +144,9 @@ def plan_segments(n_frames: int, max_frames: int) -> list[int]:
     count = 1 if n_frames <= max_frames else math.ceil(n_frames / largest)
     base = n_frames // count
     return [base + (1 if i < n_frames % count else 0) for i in range(count)]
+
+
+_LOADED: dict[tuple[str, str, str], tuple[Any, Any, str]] = {}  # (model, encoder cache, device) → loaded
 
 
 def _offline() -> None:
@@ -344,7 +348,11 @@ class KimodoGenerator:
         self._resolved = self.cfg.kimodo_model
 
     def load(self) -> Any:
-        """Load the model once, with the cached-embedding text encoder (no network, no LLM)."""
+        """The model, with the cached-embedding text encoder (no network, no LLM); loaded once per process.
+
+        A worker process keeps the last model it loaded, so the scenes it synthesises share one load
+        (Kimodo's weights take seconds to minutes to load).
+        """
         if self._model is not None:
             return self._model
         try:
@@ -362,24 +370,37 @@ class KimodoGenerator:
         if checkpoint is not None and not os.environ.get("CHECKPOINT_DIR"):
             env["LOCAL_CACHE"] = "true"
         device = self.device or ("cuda:0" if torch.cuda.is_available() else "cpu")
-        with _environment(env):
-            self._model, self._resolved = kimodo.load_model(
-                self.cfg.kimodo_model, device=device, default_family="Kimodo", return_resolved_name=True
-            )
+        key = (self.cfg.kimodo_model, str(embedding_cache_dir(self.cfg)), str(device))
+        cached = _LOADED.get(key)
+        if cached is not None and cached[0] is kimodo:  # the same kimodo module: the model is still valid
+            _, self._model, self._resolved = cached
+        else:
+            with _environment(env):
+                self._model, self._resolved = kimodo.load_model(
+                    self.cfg.kimodo_model, device=device, default_family="Kimodo", return_resolved_name=True
+                )
+            _LOADED.clear()  # one model per process: a worker keeps it across scenes
+            _LOADED[key] = (kimodo, self._model, self._resolved)
         self.device = device
         return self._model
 
     def _constraint(self, model: Any, canon: dict[str, np.ndarray]) -> Any:
-        import torch
+        """The root path as Kimodo's own ``Root2DConstraintSet.from_dict`` builds it.
 
+        That puts the frame indices on the CPU (Kimodo's post-processing indexes CPU buffers with them)
+        and the data on the skeleton's device, the model's: ``create_conditions`` moves the indices to
+        the model's device and indexes the data with them, which fails on a GPU for CPU data.
+        """
         constraints = _kimodo("kimodo.constraints")
         n = len(canon["root_2d"])
         heading = np.stack([np.cos(canon["heading"]), np.sin(canon["heading"])], axis=-1)
-        return constraints.Root2DConstraintSet(  # on the CPU, as Kimodo's CLI builds them
+        return constraints.Root2DConstraintSet.from_dict(
             model.skeleton,
-            torch.arange(n),
-            torch.as_tensor(canon["root_2d"], dtype=torch.float32),
-            global_root_heading=torch.as_tensor(heading, dtype=torch.float32),
+            {
+                "frame_indices": np.arange(n, dtype=np.int64),
+                "smooth_root_2d": np.asarray(canon["root_2d"], dtype=np.float32),
+                "global_root_heading": heading.astype(np.float32),
+            },
         )
 
     def generate(

@@ -8,7 +8,10 @@
   closes the socket after reading the request.
 
 A script is a list of steps ``(status, text, delay_s)``; ``status`` is an HTTP code, ``"close"`` (drop
-the connection) or ``"redirect"`` (302 to the URL in ``text``). ``requests`` records what arrived.
+the connection), ``"redirect"`` (302 to the URL in ``text``) or ``"refuse"`` (a 200 without content, as
+the services answer a safety block: Gemini's ``promptFeedback.blockReason`` — or, with ``text`` =
+``"candidate"``, a candidate stopped with ``finishReason: SAFETY`` — and OpenAI's ``message.refusal``,
+or with ``text`` = ``"content_filter"``, that finish reason). ``requests`` records what arrived.
 """
 
 from __future__ import annotations
@@ -64,11 +67,25 @@ class FakeServer:
                 if status == "redirect":
                     self._send(302, b"", {"Location": text})
                     return
+                if status == "refuse":
+                    self._send(200, json.dumps(self._refusal(text)).encode(), {"Content-Type": "application/json"})
+                    return
                 if outer.kind == "gemini" and status == 200:
                     bad = unknown_schema_fields(body.get("generationConfig", {}).get("responseSchema", {}))
                     if bad:
                         status, text = 400, f'Invalid JSON payload received. Unknown name "{bad[0].split(".")[-1]}"'
                 self._reply(status, text)
+
+            def _refusal(self, how: str) -> dict:
+                if outer.kind == "gemini":
+                    if how == "candidate":
+                        return {"candidates": [{"finishReason": "SAFETY", "index": 0}]}
+                    return {"promptFeedback": {"blockReason": "SAFETY"}}
+                if how == "content_filter":
+                    message = {"role": "assistant", "content": None}
+                    return {"choices": [{"index": 0, "message": message, "finish_reason": "content_filter"}]}
+                message = {"role": "assistant", "content": None, "refusal": "I can't help with that request."}
+                return {"choices": [{"index": 0, "message": message, "finish_reason": "stop"}]}
 
             def _reply(self, status: int, text: str) -> None:
                 headers = {}

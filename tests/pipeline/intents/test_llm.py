@@ -183,3 +183,19 @@ def test_an_echoed_key_is_stored_nowhere(make_scene, tmp_path, monkeypatch, kind
     result, _ = _run(make_scene, tmp_path, monkeypatch, kind, [(200, echo, 0), (200, GOOD, 0)])
     assert not result.provenance.fallback and "***" in result.description
     _no_key_anywhere(tmp_path, result)
+
+
+@pytest.mark.parametrize(
+    ("kind", "how", "said"),
+    [
+        ("gemini", "", "gemini blocked the prompt: SAFETY"),
+        ("gemini", "candidate", "finish reason SAFETY"),
+        ("openai", "", "model refused: I can't help"),
+        ("openai", "content_filter", "content filter"),
+    ],
+)
+def test_a_safety_block_is_recorded_as_such_without_a_repair(make_scene, tmp_path, monkeypatch, kind, how, said):
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [("refuse", how, 0)] + [(200, GOOD, 0)] * 3)
+    assert result.provenance.fallback and said in result.llm_error, result.llm_error
+    assert "Invalid JSON" not in result.llm_error
+    assert len(server.requests) == 1  # no repair request, no retry: the same prompt would be refused again

@@ -189,11 +189,38 @@ def test_long_track_windows_and_base_step_cap(fake):
     assert call["steps"] == fake_kimodo.BASE_STEPS and motion.info["denoising_steps"] == fake_kimodo.BASE_STEPS
 
 
-def test_constraints_on_the_cpu_whatever_the_model_device(fake):
-    """Kimodo's post-processing indexes CPU tensors with the frame indices (a device mismatch otherwise)."""
+def test_every_tensor_handed_to_kimodo_is_where_kimodo_wants_it(fake):
+    """On a GPU model: frame indices on the CPU, constraint data on the model's device (Kimodo's from_dict).
+
+    The stand-in's GPU refuses what CUDA refuses: its conditioning indexes the data with indices moved to
+    the model's device, its post-processing indexes CPU buffers with the frame indices.
+    """
+    from kimodo.fake_device import FAKE_GPU, device_of
+
     _, cfg = fake
-    motions = KimodoGenerator(cfg, device="meta").generate(_plans()[:1], ["a"], [3])  # a non-CPU model device
-    assert len(motions) == 1
+    motions = KimodoGenerator(cfg, device=FAKE_GPU).generate(_plans(), ["a", "b", "c"], [3, 4, 5])
+    assert len(motions) == 3 and all(np.isfinite(m.root_pos).all() for m in motions)
+    model = fake_kimodo.models()[0]
+    assert model.device == FAKE_GPU
+    handed = [c for call in model.calls for group in call["constraint_lst"] for c in np.atleast_1d(group)]
+    assert len(handed) == 3
+    for constraint in handed:
+        assert device_of(constraint.frame_indices) == "cpu"
+        assert (
+            device_of(constraint.smooth_root_2d) == FAKE_GPU and device_of(constraint.global_root_heading) == FAKE_GPU
+        )
+
+
+def test_the_gpu_stand_in_refuses_constraint_data_left_on_the_cpu(fake):
+    import torch
+    from kimodo.constraints import Root2DConstraintSet
+    from kimodo.fake_device import FAKE_GPU
+
+    _, cfg = fake
+    model = KimodoGenerator(cfg, device=FAKE_GPU).load()
+    cpu = Root2DConstraintSet(model.skeleton, torch.arange(4), torch.zeros(4, 2), global_root_heading=torch.ones(4, 2))
+    with pytest.raises(RuntimeError, match="same device as the indexed tensor"):
+        model([PROMPT], [4], 12, constraint_lst=[[cpu]], num_samples=1)
 
 
 def test_partial_model_names_resolve(fake):
@@ -219,6 +246,9 @@ def test_weights_from_the_hub_cache_and_no_download_ever(monkeypatch, tmp_path):
         # weights gone from the cache: the hub must refuse offline, never try a download
         for path in (tmp_path / "hf_cache").rglob("config.yaml"):
             path.unlink()
+        from song.pipeline.motion import kimodo as adapter
+
+        adapter._LOADED.clear()  # a fresh worker process: it has loaded nothing yet
         with pytest.raises(Exception, match="HF_HUB_OFFLINE|config.yaml"):
             KimodoGenerator(cfg).load()
         assert huggingface_hub.DOWNLOADS == []
@@ -238,3 +268,12 @@ def test_availability_names_what_is_missing(monkeypatch, tmp_path):
         assert kimodo_availability(cfg) == ""
     finally:
         fake_kimodo.cleanup()
+
+
+def test_the_model_is_loaded_once_per_process_not_once_per_scene(fake):
+    _, cfg = fake
+    for seed in (1, 2, 3):  # three scenes, each with its own generator (as the motion stage makes them)
+        generator, reason = make_generator(cfg)
+        assert reason == ""
+        generator.generate(_plans()[:1], ["a"], [seed])
+    assert len(fake_kimodo.models()) == 1 and len(fake_kimodo.models()[0].calls) == 3

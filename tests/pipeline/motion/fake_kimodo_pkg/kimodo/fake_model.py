@@ -1,8 +1,11 @@
 """The fake model: checks what it is given the way the real one would fail, returns SOMA-77 outputs."""
 
+from collections import defaultdict
+
 import numpy as np
 import torch
 
+from kimodo.fake_device import index, on
 from kimodo.sanitize import sanitize_texts
 
 SOMA77 = (
@@ -24,7 +27,8 @@ LLM_DIM = 4096
 
 
 class Skeleton:
-    def __init__(self, name, names):
+    def __init__(self, name, names, device="cpu"):
+        self.device = device  # Kimodo's: the device of its neutral joints, which follow the model
         self.name = name
         self.bone_order_names = names
         neutral = np.zeros((len(names), 3), dtype=np.float32)
@@ -47,14 +51,27 @@ class Diffusion:
 def _postprocess(constraint, n):
     """As Kimodo's post-processing: CPU buffers indexed with the constraint's frame indices."""
     hips = torch.zeros((n, 3))
+    index(hips, constraint.frame_indices)  # CPU buffers, so the indices must be on the CPU
     hips[constraint.frame_indices, 0] = constraint.smooth_root_2d[:, 0].cpu()
+
+
+def _create_conditions(constraints, device):
+    """As Kimodo's ``create_conditions``: indices moved to the model's device index the constraint data."""
+    index_dict, data_dict = defaultdict(list), defaultdict(list)
+    for constraint in constraints:
+        constraint.update_constraints(data_dict, index_dict)
+    for name, indices in index_dict.items():
+        for data, frames in zip(data_dict[name], indices, strict=True):
+            first = on(torch.arange(len(frames)), device)  # torch.unique's inverse lives with the moved indices
+            index(data, first)
 
 
 class Model:
     def __init__(self, text_encoder, device):
         self.fps = 30.0
-        self.skeleton = Skeleton("somaskel30", SOMA30)
-        self.output_skeleton = Skeleton("somaskel77", SOMA77)
+        where = str(device) if device is not None else "cpu"
+        self.skeleton = Skeleton("somaskel30", SOMA30, where)
+        self.output_skeleton = Skeleton("somaskel77", SOMA77, where)
         self.text_encoder = text_encoder
         self.device = device
         self.diffusion = Diffusion(BASE_STEPS)
@@ -92,6 +109,8 @@ class Model:
             samples = [(sum(num_frames), constraint_lst[0])]
         else:
             samples = [(n, group[0]) for n, group in zip(num_frames, constraint_lst, strict=True)]
+        for _, constraint in samples:
+            _create_conditions([constraint], self.skeleton.device)
         if post_processing:
             for n, constraint in samples:
                 _postprocess(constraint, n)
