@@ -140,9 +140,51 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
+@contextmanager
+def folder_lock(path: str | Path, what: str) -> Iterator[None]:
+    """Hold an exclusive lock on ``path`` (a lock file, created) while the block runs.
+
+    A second writer gets a one-line :class:`~song.errors.SongError` at once instead of interleaving
+    its files with the first's. The lock is the operating system's (``flock``): it goes with the
+    process, so a killed writer never leaves a stale lock behind.
+    """
+    import fcntl
+
+    from song.errors import SongError
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle = open(path, "a+b")  # noqa: SIM115 - held open for the lock's lifetime
+    try:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            raise SongError(f"{path.parent}: another song process is writing this {what}; wait for it to end") from None
+        yield
+    finally:
+        handle.close()  # closing releases the lock
+
+
+def finite_json(obj: Any) -> Any:
+    """``obj`` with every non-finite float (NaN, ±inf, numpy's too) replaced by None: strict JSON's null.
+
+    Strings are left alone (a path or a policy named ``NaN`` stays as it is).
+    """
+    if isinstance(obj, dict):
+        return {key: finite_json(value) for key, value in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_json(value) for value in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
 def write_json_atomic(path: str | Path, obj: Any) -> None:
-    """Atomically write ``obj`` as indented, key-sorted JSON (stable bytes for the same content)."""
-    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True, ensure_ascii=False) + "\n")
+    """Atomically write ``obj`` as indented, key-sorted strict JSON (non-finite numbers become null)."""
+    text = json.dumps(finite_json(obj), indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False)
+    write_text_atomic(path, text + "\n")
 
 
 def write_npz_atomic(path: str | Path, **arrays: np.ndarray) -> None:

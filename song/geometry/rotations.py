@@ -312,6 +312,7 @@ def smooth_quats(q: np.ndarray, sigma_frames: float, axis: int = 0) -> np.ndarra
     return quat_normalize(gaussian_filter1d(q, sigma_frames, axis=axis, mode="nearest"))
 
 
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped to ``[-π, π)``."""
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
+    """Angles wrapped to ``[-π, π)``; a float stays a float (the one rule; compiled kernels inline it)."""
+    wrapped = (np.asarray(angle, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+    return float(wrapped) if np.ndim(angle) == 0 else wrapped

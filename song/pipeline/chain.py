@@ -31,13 +31,14 @@ import numpy as np
 
 import song
 from song.config import SongConfig, config_hash, config_value
-from song.datasets.run import RunFolder, RunInfo, SceneFolder, read_run_info, write_run_info
+from song.datasets.run import RunFolder, RunInfo, read_run_info, write_run_info
 from song.datasets.run.integrity import outputs_digest, stage_settings
 from song.datasets.scenes import ScenePackage, find_scene_packages, load_scene_package
 from song.errors import SongError, StageError
 from song.parallel import ExecutorName, parallel_map
 from song.util import (
     derive_rng,
+    folder_lock,
     read_json_object,
     remove_abandoned_writes,
     sha256_file,
@@ -180,11 +181,6 @@ class SceneResult:
     def from_json(cls, data: dict[str, Any]) -> SceneResult:
         """Inverse of :meth:`to_json`."""
         return cls(**data)
-
-
-def read_stages_file(scene_dir: Path) -> dict[str, Any]:
-    """The scene's ``stages.json`` as a dict (empty when missing or unreadable)."""
-    return read_json_object(SceneFolder(Path(scene_dir)).stages)
 
 
 def _outputs_intact(scene_dir: Path, outputs: dict[str, str]) -> bool:
@@ -352,11 +348,12 @@ def iter_run(
     unknown = sorted(set(stage_names or ()) - known)
     if unknown:
         raise StageError(f"unknown stage '{unknown[0]}'; registered: {', '.join(sorted(known))}")
-    write_run_info(run, RunInfo(Path(scenes_dir).resolve(), config, config_hash(config), song.__version__))
-    names = tuple(stage_names) if stage_names is not None else None
-    jobs = [(str(root), str(run.root), config.model_dump_json(), names) for root in roots]
-    for data in parallel_map(_run_scene_job, jobs, workers, executor, scheduler):
-        yield SceneResult.from_json(data)
+    with folder_lock(run.lock_file, "run folder"):
+        write_run_info(run, RunInfo(Path(scenes_dir).resolve(), config, config_hash(config), song.__version__))
+        names = tuple(stage_names) if stage_names is not None else None
+        jobs = [(str(root), str(run.root), config.model_dump_json(), names) for root in roots]
+        for data in parallel_map(_run_scene_job, jobs, workers, executor, scheduler):
+            yield SceneResult.from_json(data)
 
 
 def read_run(run_dir: str | Path) -> tuple[Path, SongConfig]:

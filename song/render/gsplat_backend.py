@@ -12,14 +12,13 @@ import numpy as np
 
 from song.render.camera import Camera
 from song.render.gaussians import GaussianSet
+from song.render.output import RenderOutput, to_uint8
 
 
 def render_gsplat(gaussians: GaussianSet, camera: Camera, background: np.ndarray, eps2d: float):
     """One view through gsplat on the current CUDA device; returns a :class:`RenderOutput`."""
     import torch
     from gsplat import rasterization
-
-    from song.render.render import RenderOutput, to_uint8
 
     device = torch.device("cuda")
 

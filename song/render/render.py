@@ -20,13 +20,13 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from song.render import _render_kernel as kernel
 from song.render.camera import Camera
 from song.render.gaussians import CHUNK, GaussianSet, concat
+from song.render.output import RenderOutput, to_uint8  # noqa: F401 (re-exported)
 
 log = logging.getLogger(__name__)
 EPS2D = 0.3  # px², the 2-D covariance dilation (gsplat's eps2d)
@@ -34,28 +34,6 @@ CULL_MARGIN_PX = 2.0  # chunks are kept when their box reaches this close to the
 BACKENDS = ("auto", "numba", "gsplat", "reference")
 WHOLE_SET = 65_536  # sets this small skip chunk culling (bounds would cost more than they save)
 BIN_PARTS = 8  # slices of the depth order binned in parallel (a fixed count: the lists do not depend on threads)
-
-
-@dataclass(frozen=True)
-class RenderOutput:
-    """One rendered view.
-
-    Attributes:
-        rgb: (H, W, 3) uint8.
-        depth: (H, W) float32 expected planar depth, m (0 where alpha is 0).
-        alpha: (H, W) float32 coverage in [0, 1].
-        rgb_float: (H, W, 3) float32 colour before clipping and quantisation.
-    """
-
-    rgb: np.ndarray
-    depth: np.ndarray
-    alpha: np.ndarray
-    rgb_float: np.ndarray
-
-
-def to_uint8(rgb: np.ndarray) -> np.ndarray:
-    """Float colour (any shape) → uint8: clipped to [0, 1], scaled by 255 and rounded."""
-    return np.rint(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
 def visible_chunks(gaussians: GaussianSet, camera: Camera) -> np.ndarray:

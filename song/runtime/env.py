@@ -19,6 +19,7 @@ from song.datasets.bench.schema import SCHEMA_VERSION, schema_major
 from song.datasets.bench.types import RuntimeParams
 from song.errors import MissingDependencyError
 from song.runtime.avatars import make_collider
+from song.runtime.guard import PolicyFailure, as_command
 from song.runtime.loop import EpisodeRunner
 from song.runtime.sensors import SensorSuite, to_gym_space
 
@@ -98,11 +99,20 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         return self.runner.observation(), self._info()
 
     def step(self, action):
-        """Apply [v, ω]; reward = progress toward the goal, ±10 at a success / collision end."""
+        """Apply [v, ω]; reward = progress toward the goal, ±10 at a success / collision end.
+
+        An action that is not two finite numbers ends the episode as ``error`` (terminated, the reason
+        in ``info["error"]``), the rule ``song eval`` applies to a policy's malformed command.
+        """
         if self.runner is None:
             raise RuntimeError("call reset() before step()")
+        try:
+            v, w = as_command(action)
+        except PolicyFailure as exc:
+            self.runner.fail(str(exc))
+            return self.runner.observation(), 0.0, True, False, {**self._info(), "error": self.runner.error}
         previous = np.linalg.norm(self.runner.pose.xy - self.runner.episode.goal_xy)
-        outcome = self.runner.step(float(action[0]), float(action[1]))
+        outcome = self.runner.step(v, w)
         distance = np.linalg.norm(self.runner.pose.xy - self.runner.episode.goal_xy)
         progress, terminal = reward_terms(float(previous), float(distance), outcome)
         reward = progress + terminal

@@ -190,10 +190,6 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
     }
 
 
-def _json_safe(obj: Any) -> Any:
-    return json.loads(json.dumps(obj, allow_nan=True).replace("NaN", "null").replace("Infinity", "null"))
-
-
 def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult], bench: Benchmark) -> dict[str, Any]:
     """Write ``<policy>.parquet``, ``<policy>.json`` and ``<policy>.md`` into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -205,6 +201,6 @@ def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult],
     pq.write_table(table, buffer, compression="zstd")
     write_bytes_atomic(out_dir / f"{safe}.parquet", buffer.getvalue())
     summary = {**about, "benchmark": str(bench.root), "version": bench.version, "metrics": summarize(results)}
-    write_json_atomic(out_dir / f"{safe}.json", _json_safe(summary))
+    write_json_atomic(out_dir / f"{safe}.json", summary)  # strict JSON: non-finite metrics are null
     write_text_atomic(out_dir / f"{safe}.md", markdown_table({setup.policy: summary["metrics"]}))
     return summary

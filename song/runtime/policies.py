@@ -24,7 +24,7 @@ import numpy as np
 from song.config import RobotConfig
 from song.datasets.bench.types import Episode
 from song.errors import SongError
-from song.runtime.robot import wrap_angle
+from song.geometry.rotations import wrap_angle
 from song.runtime.world import StaticWorld
 
 # soft cost on predicted gaps to people below PROXIMITY_M (m); at 1.0 m the robot preferred turning on the

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from song.geometry.rotations import wrap_angle
+
 
 @dataclass(frozen=True)
 class Pose:
@@ -19,12 +21,6 @@ class Pose:
     def xy(self) -> np.ndarray:
         """(2,) position, m."""
         return np.array([self.x, self.y])
-
-
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap to [−π, π); a float stays a float."""
-    wrapped = (np.asarray(angle, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
-    return float(wrapped) if np.ndim(angle) == 0 else wrapped
 
 
 def clamp_command(v: float, omega: float, max_speed: float, max_yaw_rate: float) -> tuple[float, float]:

@@ -32,8 +32,9 @@ from typing_extensions import override
 
 from song.datasets.bench.types import Episode, RuntimeParams, pedestrian_states
 from song.errors import SongError
+from song.geometry.rotations import wrap_angle
 from song.render import resolve_backend
-from song.runtime.robot import Pose, wrap_angle
+from song.runtime.robot import Pose
 from song.runtime.vision import SceneView
 from song.runtime.world import StaticWorld, cast_circles
 

@@ -22,6 +22,7 @@ from song.datasets.avatars.asset import load_avatar
 from song.datasets.avatars.cache import PosedAvatar, load_compact_cache
 from song.datasets.bench.types import Episode, pedestrian_states
 from song.datasets.scenes.ply import read_gaussian_ply
+from song.geometry.rotations import wrap_angle
 from song.render import GaussianSet, RenderOutput, render, robot_camera
 from song.render.gaussians import SH_C0
 from song.runtime.avatars import body_proxy_points
@@ -115,8 +116,7 @@ class SceneView:
             d = float(np.hypot(*(p - pose.xy)))
             if d > far + AVATAR_MARGIN_M:
                 continue
-            bearing = math.atan2(p[1] - pose.y, p[0] - pose.x) - pose.yaw
-            bearing = (bearing + math.pi) % (2 * math.pi) - math.pi
+            bearing = wrap_angle(math.atan2(p[1] - pose.y, p[0] - pose.x) - pose.yaw)
             if d <= AVATAR_MARGIN_M or abs(bearing) <= half + math.asin(min(1.0, AVATAR_MARGIN_M / d)):
                 out.append(k)
         return out

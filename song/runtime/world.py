@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from song.datasets.bench.types import StaticMap
+from song.geometry.freespace import clearance_field
 
 
 class StaticWorld:
@@ -17,9 +17,7 @@ class StaticWorld:
 
     def __init__(self, static_map: StaticMap) -> None:
         self.map = static_map
-        free = np.pad(static_map.free, 1, constant_values=False)  # the world ends at the image border
-        edt = ndimage.distance_transform_edt(free)[1:-1, 1:-1]
-        self.clearance = np.maximum(edt - 0.5, 0.0) * static_map.resolution
+        self.clearance = clearance_field(static_map.free, static_map.resolution)  # the rule every stage uses
         self.rows = static_map.cells.shape[0]
 
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:

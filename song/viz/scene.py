@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from song.datasets.scenes import ScenePackage, load_scene_package
+from song.geometry.freespace import erode
 from song.viz.draw import Canvas, colour, label, map_canvas, write_png
 
 AGENT_RADIUS_M = 0.25
@@ -20,7 +20,7 @@ def draw_scene(package: ScenePackage, agent_radius: float = AGENT_RADIUS_M, labe
     grid = package.occupancy
     canvas = map_canvas(grid.cells, grid.resolution, grid.origin)
     image = canvas.image
-    legal = ndimage.distance_transform_edt(np.pad(grid.free, 1))[1:-1, 1:-1] * grid.resolution >= agent_radius
+    legal = erode(grid.free, grid.resolution, agent_radius)  # the legal centres the navmesh is built on
     tint = cv2.resize(legal.astype(np.uint8), image.shape[1::-1], interpolation=cv2.INTER_NEAREST).astype(bool)
     image[tint] = (0.75 * image[tint] + 0.25 * np.array([120, 200, 255])).astype(np.uint8)
     smap = package.semantic_map

@@ -70,7 +70,7 @@ def test_workers_do_not_change_bytes(make_scene, tmp_path: Path) -> None:
     _run(scenes, tmp_path / "serial", SongConfig(seed=3), executor="serial")
     _run(scenes, tmp_path / "pool", SongConfig(seed=3), executor="process", workers=2)
     assert _tree(tmp_path / "serial") == _tree(tmp_path / "pool")
-    assert len(_tree(tmp_path / "serial")) == 9
+    assert len(_tree(tmp_path / "serial")) == 10  # 3 scenes × (2 outputs + stages.json), run.json, .song.lock
 
 
 def test_dask_local_cluster_gives_identical_bytes(make_scene, tmp_path: Path) -> None:

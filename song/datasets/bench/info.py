@@ -10,7 +10,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from song.config import CameraConfig, RobotConfig
-from song.datasets.bench.schema import FORMAT_NAME, SCHEMA_VERSION, schema_major
+from song.datasets.bench.schema import FORMAT_NAME, INFO_PATH, SCHEMA_VERSION, schema_major
 from song.datasets.bench.types import RuntimeParams
 from song.errors import BenchmarkError, SchemaVersionError
 
@@ -131,3 +131,26 @@ def version_key(version: str) -> tuple[int, int, int]:
     """Sort key of a semver string."""
     major, minor, patch = (int(part) for part in version.split("."))
     return (major, minor, patch)
+
+
+def list_versions(bench_dir: str | Path) -> list[str]:
+    """Published versions under ``bench_dir`` (folders named X.Y.Z with an info.json), oldest first."""
+    bench_dir = Path(bench_dir)
+    if not bench_dir.is_dir():
+        raise BenchmarkError(f"{bench_dir}: benchmark folder is missing")
+    found = [
+        p.name for p in bench_dir.iterdir() if p.is_dir() and SEMVER.fullmatch(p.name) and (p / INFO_PATH).is_file()
+    ]
+    return sorted(found, key=version_key)
+
+
+def resolve_version(bench_dir: str | Path, version: str | None) -> Path:
+    """The release folder of ``version`` (the latest when None)."""
+    versions = list_versions(bench_dir)
+    if not versions:
+        raise BenchmarkError(f"{bench_dir}: no released versions; run `song export-bench` first")
+    if version is None:
+        version = versions[-1]
+    if version not in versions:
+        raise BenchmarkError(f"{bench_dir}: version {version} not found; available: {', '.join(versions)}")
+    return Path(bench_dir) / version

@@ -15,8 +15,7 @@ import numpy as np
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from song.datasets.bench.info import Info, check_schema_version, read_info, runtime_params
-from song.datasets.bench.release import resolve_version
+from song.datasets.bench.info import Info, check_schema_version, read_info, resolve_version, runtime_params
 from song.datasets.bench.schema import (
     AVATARS_PATH,
     DIFFICULTIES,

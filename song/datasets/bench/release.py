@@ -9,33 +9,10 @@ from typing import Any
 
 import pyarrow.parquet as pq
 
-from song.datasets.bench.info import SEMVER, Info, read_info, version_key
+from song.datasets.bench.info import Info, list_versions, read_info, resolve_version, version_key  # noqa: F401
+from song.datasets.bench.load import Benchmark
 from song.datasets.bench.schema import EPISODES_PATH, INFO_FINGERPRINT_SINCE, INFO_PATH, MANIFEST_PATH
-from song.errors import BenchmarkError
 from song.util import sha256_file, sha256_json
-
-
-def list_versions(bench_dir: str | Path) -> list[str]:
-    """Published versions under ``bench_dir`` (folders named X.Y.Z with an info.json), oldest first."""
-    bench_dir = Path(bench_dir)
-    if not bench_dir.is_dir():
-        raise BenchmarkError(f"{bench_dir}: benchmark folder is missing")
-    found = [
-        p.name for p in bench_dir.iterdir() if p.is_dir() and SEMVER.fullmatch(p.name) and (p / INFO_PATH).is_file()
-    ]
-    return sorted(found, key=version_key)
-
-
-def resolve_version(bench_dir: str | Path, version: str | None) -> Path:
-    """The release folder of ``version`` (the latest when None)."""
-    versions = list_versions(bench_dir)
-    if not versions:
-        raise BenchmarkError(f"{bench_dir}: no released versions; run `song export-bench` first")
-    if version is None:
-        version = versions[-1]
-    if version not in versions:
-        raise BenchmarkError(f"{bench_dir}: version {version} not found; available: {', '.join(versions)}")
-    return Path(bench_dir) / version
 
 
 @dataclass
@@ -111,8 +88,6 @@ def _schemas(info: Info) -> dict[str, list[str]]:
 
 def _filled_columns(release: Path) -> dict[str, set[str]]:
     """Per table, the columns holding at least one value (the release opened confined and bounded)."""
-    from song.datasets.bench.load import Benchmark
-
     bench = Benchmark(release)
     tables = {"episodes": bench.episodes_table, "scenes": bench.scenes_table,
               "pedestrians": bench.pedestrians_table, "avatars": bench.avatars_table}  # fmt: skip

@@ -55,11 +55,6 @@ class CrowdTracks:
     speed: np.ndarray
     fps: int
 
-    @property
-    def duration_s(self) -> float:
-        """Length of the scenario, s (frames / fps)."""
-        return self.xy.shape[1] / self.fps if self.xy.ndim == 3 else 0.0
-
 
 def _arrow(values: np.ndarray, kind: pa.DataType) -> pa.Array:
     """A null-free Arrow array over a contiguous numpy buffer (``pa.array`` would import pandas: 0.4 s)."""

@@ -135,11 +135,6 @@ class WallDistance:
         """(N,) distance to the nearest wall at points (N, 2), m (the agent radius off the mesh)."""
         return self.field[self._cells(xy)]
 
-    def room_at(self, xy: np.ndarray, upto: float) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`at` and :meth:`half_width_at` of the same points, looked up once."""
-        cells = self._cells(xy)
-        return self.field[cells], self.thickness(upto)[cells]
-
     def thickness(self, upto: float) -> np.ndarray:
         """The grid of :meth:`half_width_at` (rows, cols), m."""
         if upto not in self._half_width:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from song.geometry.outline import nearest_on_outline
+from song.geometry.rotations import wrap_angle
 
 RATE_HZ = 2.5
 MOVING_MPS = 0.2
@@ -326,6 +327,6 @@ def stop_facing(crowd, intents: list, objects: dict, settle_s: float = 2.0, min_
                 p = crowd.xy[k, settled].mean(axis=0)
                 q = nearest_on_outline(np.asarray(objects[oid].footprint), p[None])[0][0]
                 want = np.arctan2(q[1] - p[1], q[0] - p[0])
-                miss = np.abs((crowd.yaw[k, settled] - want + np.pi) % (2 * np.pi) - np.pi)
+                miss = np.abs(wrap_angle(crowd.yaw[k, settled] - want))
                 out.append(float(np.degrees(np.median(miss))))
     return out

@@ -18,9 +18,10 @@ from song.datasets.run import RunFolder, read_crowd, read_run_info
 from song.datasets.run.integrity import check_fresh, check_scene_unchanged, graded_inputs
 from song.datasets.run.layout import CROWD_FILE
 from song.datasets.scenes import load_scene_package
+from song.geometry.rotations import wrap_angle
 from song.parallel import parallel_map
 from song.pipeline.grading.sample import Crowd, EpisodeSampler, RobotMap, closest_pass
-from song.util import derive_rng, write_bytes_atomic, write_json_atomic
+from song.util import derive_rng, folder_lock, write_bytes_atomic, write_json_atomic
 
 FACTORS = ("path_length", "n_turns", "n_encounters", "corridor_width")
 BINS = ("bin_length", "bin_turns", "bin_encounters", "bin_width")
@@ -37,7 +38,7 @@ def count_turns(path: np.ndarray, threshold_deg: float) -> int:
     if len(d) < 2:
         return 0
     heading = np.arctan2(d[:, 1], d[:, 0])
-    change = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    change = np.abs(wrap_angle(np.diff(heading)))
     return int(np.count_nonzero(np.degrees(change) > threshold_deg))
 
 
@@ -224,6 +225,11 @@ def grade_run(
     splits every scene is in ``test``.
     """
     run = RunFolder(Path(run_dir))
+    with folder_lock(run.lock_file, "run folder"):
+        return _grade_run(run, config, n_episodes, workers, splits, split_episodes)
+
+
+def _grade_run(run: RunFolder, config, n_episodes, workers, splits, split_episodes) -> GradingResult:
     run_info = read_run_info(run.root)
     config = config or run_info.config
     total = n_episodes or config.grading.n_episodes

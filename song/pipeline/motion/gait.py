@@ -265,7 +265,7 @@ def _integrate_phase(
     def off(foot: int, i: int) -> bool:
         px, py, ph = stance[foot][last[foot]]
         nx, ny, nh = neutral(foot, xs[i], ys[i], hs[i])
-        dyaw = (ph - nh + math.pi) % (2 * math.pi) - math.pi
+        dyaw = wrap_angle(ph - nh)
         return math.hypot(px - nx, py - ny) > _SETTLE_POS or abs(dyaw) > _SETTLE_YAW
 
     s = style.start_phase

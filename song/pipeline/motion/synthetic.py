@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from song.config import DEFAULT_FPS as FPS
+from song.geometry.rotations import wrap_angle
 from song.pipeline.motion.types import Trajectory
 
 
@@ -31,8 +32,7 @@ def trajectory_from_profiles(
     step = np.stack([np.cos(yaw), np.sin(yaw)], axis=-1) * speed[:, None] * dt
     xy = np.array(start[:2]) + np.concatenate([[[0.0, 0.0]], np.cumsum(step[:-1], axis=0)])
     frame = np.arange(n, dtype=np.int32)
-    wrapped = (yaw + np.pi) % (2 * np.pi) - np.pi
-    return Trajectory(ped_id=ped_id, t=frame / FPS, frame=frame, xy=xy, yaw=wrapped, speed=speed)
+    return Trajectory(ped_id=ped_id, t=frame / FPS, frame=frame, xy=xy, yaw=wrap_angle(yaw), speed=speed)
 
 
 def _ramp(n: int, rise: int, level: float) -> np.ndarray:

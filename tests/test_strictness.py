@@ -1,0 +1,93 @@
+"""One rule each: strict results JSON, a malformed action ends the episode as ``error`` everywhere, one
+writer per run folder."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from song.cli import app
+from song.errors import SongError
+from song.util import finite_json, folder_lock, write_json_atomic
+
+GOLDEN = Path(__file__).resolve().parent / "artifacts" / "bench_golden"
+
+
+def _fail(name: str) -> None:
+    raise AssertionError(f"non-standard JSON constant {name}")
+
+
+def test_non_finite_numbers_become_null_and_strings_stay(tmp_path: Path) -> None:
+    data = {"path": "/home/NaNa/-Infinity", "nan": float("nan"), "inf": [np.float32("inf"), 1.5], "n": np.int64(3)}
+    write_json_atomic(tmp_path / "a.json", data)
+    back = json.loads((tmp_path / "a.json").read_text(), parse_constant=_fail)
+    assert back == {"path": "/home/NaNa/-Infinity", "nan": None, "inf": [None, 1.5], "n": 3}
+    assert finite_json("NaN") == "NaN"
+
+
+def test_results_json_of_a_policy_named_nans_in_a_folder_named_nan(tmp_path: Path) -> None:
+    """A policy whose every command makes a NaN-free but odd run; the names must round-trip unchanged."""
+    folder = tmp_path / "NaN-Infinity"
+    shutil.copytree(GOLDEN, folder / "bench")
+    module = folder / "evil.py"
+    module.write_text(
+        textwrap.dedent(
+            """
+            class NaNs:
+                sensors = ("state",)
+
+                def reset(self, episode):
+                    pass
+
+                def act(self, observation):
+                    return (0.0, 0.0)  # stands still: every metric that divides by progress is not finite
+            """
+        )
+    )
+    out = folder / "out"
+    result = CliRunner().invoke(
+        app, ["eval", "--bench", str(folder / "bench"), "--policy", f"{module}:NaNs", "--out", str(out), "--limit", "2"]
+    )
+    assert result.exit_code == 0, result.output
+    (written,) = out.glob("*.json")
+    summary = json.loads(written.read_text(), parse_constant=_fail)
+    assert summary["policy"] == f"{module}:NaNs" and summary["benchmark"].startswith(str(folder))
+
+
+def test_a_nan_action_ends_the_env_episode_as_error_like_song_eval() -> None:
+    pytest.importorskip("gymnasium")
+    from song.runtime.env import SongNavEnv
+
+    env = SongNavEnv(str(GOLDEN))
+    env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(np.array([np.nan, 0.0], dtype=np.float32))
+    assert terminated and not truncated and reward == 0.0
+    assert info["outcome"] == "error" and "two finite numbers" in info["error"]
+
+
+def test_one_writer_per_run_folder(tmp_path: Path) -> None:
+    lock = tmp_path / "run" / ".song.lock"
+    lock.parent.mkdir(parents=True)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", f"import fcntl, time; f = open({str(lock)!r}, 'a+b'); "
+         "fcntl.flock(f.fileno(), fcntl.LOCK_EX); print('held', flush=True); time.sleep(30)"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(SongError, match="another song process is writing this run folder"):
+            with folder_lock(lock, "run folder"):
+                pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with folder_lock(lock, "run folder"):  # the holder is gone: its lock went with it
+        pass
