@@ -36,8 +36,9 @@ class ScenesConfig(_Section):
 class IntentsConfig(_Section):
     """Semantic intent generation (paper: "Semantic intent generation")."""
 
-    llm: Literal["auto", "offline", "gemini", "openai"] = Field(
-        "auto", description="auto = gemini when a key is set, else offline"
+    llm: str = Field(
+        "auto",
+        description="auto (gemini when a key is set, else offline), offline, or an `llm` plugin (gemini, openai)",
     )
     gemini_model: str = Field(
         "gemini-3.5-flash",
@@ -72,8 +73,9 @@ class CrowdConfig(_Section):
     """Navmesh + ORCA crowd planning (paper: Recast/DetourCrowd)."""
 
     fps: int = Field(DEFAULT_FPS, ge=1, le=240, description="simulation and output rate, frames/s (paper: 30)")
-    avoidance: Literal["orca", "social_force"] = Field(
-        "orca", description="local-avoidance model (song.pipeline.crowd.avoidance; docs/crowd.md says why ORCA)"
+    avoidance: str = Field(
+        "orca",
+        description="local-avoidance model: an `avoidance` plugin (orca, social_force, or module:Class; docs/crowd.md)",
     )
     agent_radius_m: float = Field(0.25, gt=0.0, le=1.0, description="pedestrian body radius, m")
     comfort_distance_m: float = Field(
@@ -103,7 +105,9 @@ class CrowdConfig(_Section):
 class MotionConfig(_Section):
     """Full-body motion (paper: Kimodo + trajectory-consistency post-processing)."""
 
-    generator: Literal["auto", "procedural", "kimodo"] = Field("auto", description="motion generator")
+    generator: str = Field(
+        "auto", description="auto (kimodo when usable, else procedural) or a `motion_generator` plugin"
+    )
     prompt: str = Field(
         "A person is casually walking forward at a natural pace with minimal waist sway",
         description="Kimodo text prompt (paper appendix)",

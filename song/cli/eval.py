@@ -15,7 +15,11 @@ from song.cli.common import ConfigOption, SetOption, console, err_console, handl
 @handle_errors
 def eval_command(
     bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
-    policy: list[str] = typer.Option(["social"], "--policy", help="straight | astar | social | depth | module:Class"),
+    policy: list[str] = typer.Option(
+        ["social"],
+        "--policy",
+        help="straight | astar | social | depth | a policy plugin | module:Class | file.py:Class",
+    ),
     difficulty: str | None = typer.Option(None, "--difficulty", help="easy | medium | hard (default: all)"),
     split: str = typer.Option("test", "--split", help="which split's episodes (train | val | test)"),
     limit: int | None = typer.Option(
@@ -27,7 +31,12 @@ def eval_command(
     resolution: str | None = typer.Option(
         None, "--resolution", metavar="WxH", help="camera sensors' image size (default: the release's, 960x540)"
     ),
-    render_backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat"),
+    render_backend: str = typer.Option(
+        "auto", "--render-backend", help="auto | numba | gsplat | reference | a render_backend plugin"
+    ),
+    camera_model: str = typer.Option(
+        "ideal", "--camera-model", help="what the camera does to the ideal image: ideal | a camera_model plugin"
+    ),
     out: Path = typer.Option(Path("runs/eval"), "--out", help="results folder"),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
     step_timeout: float = typer.Option(
@@ -57,7 +66,7 @@ def eval_command(
     params, changed = apply_overrides(release.params, requested, override, str(config or "--set"))
     for key, (old, new) in changed.items():
         err_console.print(f"[yellow]override[/yellow] {key}: {old} → {new} (results marked unofficial)")
-    camera: dict = {"backend": render_backend}
+    camera: dict = {"backend": render_backend, "model": camera_model}
     if resolution:
         width, height = parse_size(resolution, "--resolution")
         camera.update(width=width, height=height)

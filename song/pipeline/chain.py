@@ -30,11 +30,12 @@ from typing import Any, Literal
 import numpy as np
 
 import song
+from song import plugins
 from song.config import SongConfig, config_hash, config_value
 from song.datasets.run import RunFolder, RunInfo, read_run_info, write_run_info
 from song.datasets.run.integrity import outputs_digest, stage_settings
 from song.datasets.scenes import ScenePackage, find_scene_packages, load_scene_package
-from song.errors import SongError, StageError
+from song.errors import ConfigError, SongError, StageError
 from song.parallel import ExecutorName, parallel_map
 from song.util import (
     derive_rng,
@@ -113,13 +114,9 @@ class Stage:
     reads: tuple[str, ...] = ()
 
 
-_REGISTRY: dict[str, Stage] = {}
-
-
 def register_stage(stage: Stage) -> Stage:
-    """Add (or replace) a stage in the registry."""
-    _REGISTRY[stage.name] = stage
-    return stage
+    """Add (or replace) a stage: the ``stage`` kind of :mod:`song.plugins`."""
+    return plugins.add("stage", stage.name, stage)
 
 
 def stage_order(stages: Iterable[Stage]) -> list[Stage]:
@@ -146,13 +143,13 @@ def stage_order(stages: Iterable[Stage]) -> list[Stage]:
 def load_stages() -> list[Stage]:
     """Import the stage modules and return the registered stages in dependency order.
 
-    Extra stage modules (plugins) can be named in the ``SONG_STAGE_PLUGINS`` environment variable
-    (comma-separated module names).
+    Third-party stages come from ``song.plugins`` entry points (see :mod:`song.plugins`) or from modules
+    named in the ``SONG_STAGE_PLUGINS`` environment variable (comma-separated module names).
     """
-    plugins = [name.strip() for name in os.environ.get(PLUGINS_ENV, "").split(",") if name.strip()]
-    for module in (*STAGE_MODULES, *plugins):
+    extra = [name.strip() for name in os.environ.get(PLUGINS_ENV, "").split(",") if name.strip()]
+    for module in (*STAGE_MODULES, *extra):
         importlib.import_module(module)
-    return stage_order(_REGISTRY.values())
+    return stage_order(plugins.registered("stage").values())
 
 
 @dataclass
@@ -338,6 +335,7 @@ def iter_run(
     ``process`` pool of ``workers``, or ``dask`` at ``scheduler``). Outputs do not depend on the
     executor, the worker count or the completion order (DESIGN §3).
     """
+    check_plugin_names(config)  # an unknown name fails here, before anything is written
     run = RunFolder(Path(run_dir))
     run.root.mkdir(parents=True, exist_ok=True)
     roots = find_scene_packages(scenes_dir)
@@ -354,6 +352,25 @@ def iter_run(
         jobs = [(str(root), str(run.root), config.model_dump_json(), names) for root in roots]
         for data in parallel_map(_run_scene_job, jobs, workers, executor, scheduler):
             yield SceneResult.from_json(data)
+
+
+def check_plugin_names(config: SongConfig) -> None:
+    """Refuse (one line, listing the known names) a config naming a plugin that nothing registers.
+
+    Raises:
+        ConfigError: ``intents.llm``, ``crowd.avoidance`` or ``motion.generator`` names no plugin.
+    """
+    load_stages()  # the stage modules register their kinds' built-ins
+    checks = (
+        ("intents.llm", "llm", config.intents.llm, ("auto", "offline")),
+        ("crowd.avoidance", "avoidance", config.crowd.avoidance, ()),
+        ("motion.generator", "motion_generator", config.motion.generator, ("auto",)),
+    )
+    for key, kind, name, extra in checks:
+        try:
+            plugins.check_name(kind, name, extra)
+        except plugins.PluginError as exc:
+            raise ConfigError("<config>", key, str(exc)) from None
 
 
 def read_run(run_dir: str | Path) -> tuple[Path, SongConfig]:

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from song import plugins
 from song.render import _render_kernel as kernel
 from song.render.camera import Camera
 from song.render.gaussians import CHUNK, GaussianSet, concat
@@ -31,7 +32,7 @@ from song.render.output import RenderOutput, to_uint8  # noqa: F401 (re-exported
 log = logging.getLogger(__name__)
 EPS2D = 0.3  # px², the 2-D covariance dilation (gsplat's eps2d)
 CULL_MARGIN_PX = 2.0  # chunks are kept when their box reaches this close to the image edge
-BACKENDS = ("auto", "numba", "gsplat", "reference")
+BACKENDS = ("auto", "numba", "gsplat", "reference")  # the built-ins; plugins add more (song.plugins)
 WHOLE_SET = 65_536  # sets this small skip chunk culling (bounds would cost more than they save)
 BIN_PARTS = 8  # slices of the depth order binned in parallel (a fixed count: the lists do not depend on threads)
 
@@ -141,12 +142,28 @@ def gsplat_available() -> str:
     return ""
 
 
+def _render_gsplat(sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray, profile=None) -> RenderOutput:
+    from song.render.gsplat_backend import render_gsplat
+
+    return render_gsplat(concat(sets), camera, background, EPS2D)
+
+
+plugins.add("render_backend", "numba", _render_numba)
+plugins.add("render_backend", "gsplat", _render_gsplat)
+plugins.add("render_backend", "reference", lambda sets, camera, background, profile=None: _render_reference(
+    sets, camera, background))  # fmt: skip
+
+
 def resolve_backend(backend: str) -> str:
-    """The backend that ``backend`` means here (``auto`` → gsplat when usable, else numba)."""
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown render backend '{backend}'; choose one of {', '.join(BACKENDS)}")
+    """The backend that ``backend`` means here (``auto`` → gsplat when usable, else numba).
+
+    Any other name is a ``render_backend`` plugin (:mod:`song.plugins`): ``fn(sets, camera, background,
+    profile) -> RenderOutput`` for a list of :class:`GaussianSet`, a :class:`Camera`, an RGB background
+    in [0, 1] and an optional per-phase timing dict.
+    """
     if backend == "auto":
         return "gsplat" if not gsplat_available() else "numba"
+    plugins.check_name("render_backend", backend, extra=("auto",))
     return backend
 
 
@@ -173,17 +190,11 @@ def render(
     sets = [gaussians] if isinstance(gaussians, GaussianSet) else list(gaussians)
     bg = np.asarray(background, dtype=np.float64).reshape(3)
     name = resolve_backend(backend)
-    if name == "gsplat":
-        from song.render.gsplat_backend import render_gsplat
-
+    if name == "gsplat" and backend == "auto":
         try:
-            return render_gsplat(concat(sets), camera, bg, EPS2D)
+            return _render_gsplat(sets, camera, bg)
         except Exception as exc:  # CUDA compile or runtime failure: fall back once, say so
-            if backend != "auto":
-                raise
             _GSPLAT_STATE["error"] = f"gsplat failed ({type(exc).__name__}: {exc}); rendering with numba on the CPU"
             log.warning(_GSPLAT_STATE["error"])
             name = "numba"
-    if name == "reference":
-        return _render_reference(sets, camera, bg)
-    return _render_numba(sets, camera, bg, profile)
+    return plugins.lookup("render_backend", name)(sets, camera, bg, profile)

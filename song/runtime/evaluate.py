@@ -18,6 +18,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from song import plugins
 from song.datasets.bench import Benchmark, Episode, open_benchmark
 from song.datasets.bench.schema import DIFFICULTIES
 from song.datasets.bench.types import RuntimeParams
@@ -97,6 +98,8 @@ def make_setup(
     """
     names = parse_sensor_names([*policy_sensors(load_policy(policy)), *parse_sensor_names(sensors or [])])
     options = {"camera": dict(camera)} if camera else {}
+    plugins.check_name("render_backend", options.get("camera", {}).get("backend", "auto"), extra=("auto",))
+    plugins.check_name("camera_model", options.get("camera", {}).get("model", "ideal"))
     return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options, step_timeout_s)
 
 
@@ -115,8 +118,8 @@ def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  
     bench = cache[job.bench]
     setup = job.setup
     episode = dataclasses.replace(bench.episode(job.episode_id), params=setup.params)
+    policy = load_policy(setup.policy)  # first: its module may register the sensors it declares
     sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
-    policy = load_policy(setup.policy)
     return run_episode(episode, policy, make_collider(episode), sensors, step_timeout_s=setup.step_timeout_s)
 
 

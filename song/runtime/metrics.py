@@ -17,10 +17,13 @@ All rates are percentages in the summary (0–100); per-episode values are fract
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from song import plugins
 
 OUTCOMES = ("success", "obstacle", "human", "timeout", "error")
 
@@ -109,46 +112,86 @@ def episode_metrics(
     )
 
 
-def aggregate(episodes: Sequence[EpisodeMetrics]) -> dict[str, float]:
-    """The paper's metric row over a set of episodes (rates in %, AvgT in s, MinD in m)."""
-    n = len(episodes)
-    if n == 0:
-        return {
-            key: float("nan")
-            for key in ("n", "SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "MinD", "JK", "ERR")
-        }
-    outcome = np.array([e.outcome for e in episodes])
-    success = (outcome == "success").astype(np.float64)
-    times = np.array([e.time for e in episodes])
-    min_d = np.array([e.min_distance for e in episodes])
-    finite = np.isfinite(min_d)
-    return {
-        "n": float(n),
-        "SR": 100.0 * success.mean(),
-        "SPL": 100.0 * spl(success, [e.length for e in episodes], [e.optimal_length for e in episodes]).mean(),
-        "STL": 100.0 * stl(success, times, [e.optimal_time for e in episodes]).mean(),
-        "TO": 100.0 * np.mean(outcome == "timeout"),
-        "AvgT": float(times[success > 0].mean()) if success.any() else float("nan"),
-        "CR_obs": 100.0 * np.mean(outcome == "obstacle"),
-        "CR_hum": 100.0 * np.mean(outcome == "human"),
-        "PSC": 100.0 * float(np.mean([e.psc for e in episodes])),
-        "MinD": float(min_d[finite].mean()) if finite.any() else float("nan"),
-        "JK": float(np.mean([e.jerk for e in episodes])),
-        "ERR": 100.0 * np.mean(outcome == "error"),
-    }
+@dataclass(frozen=True)
+class Metric:
+    """An aggregate metric: a column of every results table (a ``metric`` plugin, :mod:`song.plugins`).
+
+    ``value(episodes)`` gets a non-empty sequence of episodes -- ``song eval``'s
+    :class:`~song.runtime.loop.EpisodeResult` (outcome, trajectory, nearest distances, ``metrics``) or
+    bare :class:`EpisodeMetrics` -- and returns one number (NaN when undefined). A third-party metric is
+    any object (or class with no arguments) with ``name`` and ``value``; ``only_when_nonzero`` hides its
+    column from the Markdown table while it is 0 everywhere.
+    """
+
+    name: str
+    compute: Callable[[Sequence[EpisodeMetrics]], float]
+    only_when_nonzero: bool = False
+
+    def value(self, episodes: Sequence[Any]) -> float:
+        """The metric over ``episodes``."""
+        return float(self.compute([getattr(e, "metrics", e) for e in episodes]))
 
 
-METRIC_COLUMNS = ("SR", "SPL", "STL", "TO", "AvgT", "CR_obs", "CR_hum", "PSC", "MinD", "JK")
+def _outcome_rate(kind: str) -> Callable[[Sequence[EpisodeMetrics]], float]:
+    return lambda es: 100.0 * float(np.mean([e.outcome == kind for e in es]))
+
+
+def _success(es: Sequence[EpisodeMetrics]) -> np.ndarray:
+    return np.array([e.outcome == "success" for e in es], dtype=np.float64)
+
+
+def _avg_time(es: Sequence[EpisodeMetrics]) -> float:
+    times = np.array([e.time for e in es])[_success(es) > 0]
+    return float(times.mean()) if len(times) else float("nan")
+
+
+def _min_distance(es: Sequence[EpisodeMetrics]) -> float:
+    d = np.array([e.min_distance for e in es])
+    return float(d[np.isfinite(d)].mean()) if np.isfinite(d).any() else float("nan")
+
+
+BUILTIN_METRICS = (
+    Metric("SR", _outcome_rate("success")),
+    Metric("SPL", lambda es: 100.0 * float(spl(_success(es), [e.length for e in es], [e.optimal_length for e in es]).mean())),
+    Metric("STL", lambda es: 100.0 * float(stl(_success(es), [e.time for e in es], [e.optimal_time for e in es]).mean())),
+    Metric("TO", _outcome_rate("timeout")),
+    Metric("AvgT", _avg_time),
+    Metric("CR_obs", _outcome_rate("obstacle")),
+    Metric("CR_hum", _outcome_rate("human")),
+    Metric("PSC", lambda es: 100.0 * float(np.mean([e.psc for e in es]))),
+    Metric("MinD", _min_distance),
+    Metric("JK", lambda es: float(np.mean([e.jerk for e in es]))),
+    Metric("ERR", _outcome_rate("error"), only_when_nonzero=True),
+)  # fmt: skip
+for _metric in BUILTIN_METRICS:
+    plugins.add("metric", _metric.name, _metric)
+
+
+def metrics() -> list[Any]:
+    """Every registered metric, built-ins first (classes are instantiated)."""
+    return [m() if isinstance(m, type) else m for m in plugins.registered("metric").values()]
+
+
+def aggregate(episodes: Sequence[Any]) -> dict[str, float]:
+    """Every registered metric over a set of episodes, and ``n`` (rates in %, AvgT in s, MinD in m)."""
+    row = {"n": float(len(episodes))}
+    for metric in metrics():
+        row[metric.name] = float(metric.value(episodes)) if episodes else float("nan")
+    return row
 
 
 def markdown_table(rows: dict[str, dict[str, dict[str, float]]]) -> str:
-    """The paper's Table 2 layout: one row per (policy, difficulty), metric columns."""
-    failed = any(v.get("ERR", 0.0) > 0 for by in rows.values() for v in by.values())
-    columns = METRIC_COLUMNS + (("ERR",) if failed else ())
+    """The paper's Table 2 layout: one row per (policy, difficulty), one column per registered metric."""
+    values = [v for by in rows.values() for v in by.values()]
+    columns = [
+        m.name
+        for m in metrics()
+        if not getattr(m, "only_when_nonzero", False) or any(v.get(m.name, 0.0) > 0 for v in values)
+    ]
     header = "| policy | difficulty | n | " + " | ".join(columns) + " |"
     lines = [header, "|" + "---|" * (3 + len(columns))]
     for policy, by_difficulty in rows.items():
-        for difficulty, values in by_difficulty.items():
-            cells = [f"{values[c]:.2f}" if np.isfinite(values[c]) else "–" for c in columns]
-            lines.append(f"| {policy} | {difficulty} | {int(values['n'])} | " + " | ".join(cells) + " |")
+        for difficulty, row in by_difficulty.items():
+            cells = [f"{row[c]:.2f}" if np.isfinite(row.get(c, np.nan)) else "–" for c in columns]
+            lines.append(f"| {policy} | {difficulty} | {int(row['n'])} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -14,13 +14,11 @@ never from constants here. A user's policy loads with ``--policy module:Class``.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from song import plugins
 from song.config import RobotConfig
 from song.datasets.bench.types import Episode
 from song.errors import SongError
@@ -217,44 +215,22 @@ def _depth_policy() -> Policy:
     return DepthPolicy()
 
 
-BASELINES = {"straight": StraightPolicy, "astar": AStarPolicy, "social": SocialPolicy, "depth": _depth_policy}
-
-
-def _policy_module(spec: str):
-    """Import ``spec``: a dotted module name, or a ``.py`` file (loaded under its stem)."""
-    if not spec.endswith(".py"):
-        return importlib.import_module(spec)
-    path = Path(spec).expanduser()
-    if not path.is_file():
-        raise OSError(f"{path}: no such policy file")
-    module_spec = importlib.util.spec_from_file_location(f"song_user_policy_{path.stem}", path)
-    module = importlib.util.module_from_spec(module_spec)
-    module_spec.loader.exec_module(module)
-    return module
+for _name, _factory in (("straight", StraightPolicy), ("astar", AStarPolicy), ("social", SocialPolicy),
+                        ("depth", _depth_policy)):  # fmt: skip
+    plugins.add("policy", _name, _factory)
+BASELINES = ("straight", "astar", "social", "depth")
 
 
 def load_policy(name: str) -> Policy:
-    """A baseline by name, or ``module:Class`` / ``path/to/file.py:Class`` for a user's policy (no arguments)."""
-    if name in BASELINES:
-        return BASELINES[name]()
-    if ":" not in name:
-        raise SongError(
-            f"unknown policy '{name}': use one of {', '.join(BASELINES)}, module:Class or path/to/file.py:Class"
-        )
-    module_name, _, attr = name.rpartition(":")
+    """A ``policy`` plugin by name (a baseline, a registered plugin, ``module:Class`` or ``file.py:Class``).
+
+    The plugin is called with no arguments; the result must have ``reset(episode)`` and ``act(observation)``.
+    """
+    factory = plugins.lookup("policy", name)
     try:
-        module = _policy_module(module_name)
-    except ModuleNotFoundError as exc:
-        raise SongError(
-            f"cannot load policy '{name}': no module named '{exc.name}' (add its folder to PYTHONPATH, "
-            "or give the file: path/to/file.py:Class)"
-        ) from exc
-    except (ImportError, OSError) as exc:
-        raise SongError(f"cannot load policy '{name}': {exc}") from exc
-    try:
-        policy = getattr(module, attr)()
-    except AttributeError as exc:
-        raise SongError(f"cannot load policy '{name}': {exc}") from exc
+        policy = factory()
+    except Exception as exc:  # the user's __init__ failed: one line, naming the policy
+        raise SongError(f"cannot create policy '{name}': {type(exc).__name__}: {exc}") from exc
     if not (callable(getattr(policy, "reset", None)) and callable(getattr(policy, "act", None))):
         raise SongError(f"policy '{name}' must define reset(episode) and act(observation)")
     return policy

@@ -3,8 +3,8 @@
 An observation is a dict of named sensor outputs. Each sensor declares its Gymnasium space as a
 :class:`Box` (or a dict of them) without importing Gymnasium, is reset once per episode, and reads
 what it needs from the :class:`RobotView` of the current step. Sensors are chosen by name
-(``song eval --sensors state,scan``; ``SongNavEnv(sensors=...)``); adding one is a class plus one
-entry in :data:`SENSORS`.
+(``song eval --sensors state,scan``; ``SongNavEnv(sensors=...)``); adding one is a :class:`Sensor`
+subclass registered as a ``sensor`` plugin (``@register("sensor", "name")``, :mod:`song.plugins`).
 
 Built in:
 - ``state``: the robot's own state: ``pose`` (x, y, yaw; GPS + compass as in PointNav), ``velocity``
@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from typing_extensions import override
 
+from song import plugins
 from song.datasets.bench.types import Episode, RuntimeParams, pedestrian_states
 from song.errors import SongError
 from song.geometry.rotations import wrap_angle
@@ -267,6 +268,7 @@ class CameraSensor(Sensor):
             "hfov_deg": camera.hfov_deg,
             "mount_height_m": camera.height_m,
             "backend": resolve_backend(self.scene_view.backend),
+            "camera_model": self.scene_view.camera_model,
         }
 
 
@@ -314,27 +316,20 @@ class RgbdSensor(CameraSensor):
 
 
 CAMERA_SENSORS = ("rgb", "depth", "rgbd")
-SENSORS: dict[str, Callable[..., Sensor]] = {
-    "state": StateSensor,
-    "scan": ScanSensor,
-    "pedestrians": PedestrianSensor,
-    "rgb": RgbSensor,
-    "depth": DepthSensor,
-    "rgbd": RgbdSensor,
-}
+for _sensor in (StateSensor, ScanSensor, PedestrianSensor, RgbSensor, DepthSensor, RgbdSensor):
+    plugins.add("sensor", _sensor.name, _sensor)
 
 
 def register_sensor(name: str, factory: Callable[..., Sensor]) -> None:
-    """Add a sensor type (``factory(params, **options) -> Sensor``) under ``name``."""
-    SENSORS[name] = factory
+    """Add a sensor type (``factory(params, **options) -> Sensor``) under ``name`` (a ``sensor`` plugin)."""
+    plugins.add("sensor", name, factory)
 
 
 def parse_sensor_names(text: str | Iterable[str]) -> tuple[str, ...]:
     """``"state,scan"`` (or a list) → validated, de-duplicated names in the given order."""
     names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
     for name in names:
-        if name not in SENSORS:
-            raise SongError(f"unknown sensor '{name}'; available: {', '.join(SENSORS)}")
+        plugins.lookup("sensor", name)  # refuses an unknown name, listing the known ones
     return tuple(dict.fromkeys(names))
 
 
@@ -355,22 +350,24 @@ class SensorSuite:
         """Sensors by name for ``params``.
 
         Args:
-            names: sensor names (see :data:`SENSORS`).
+            names: sensor names (``sensor`` plugins, :mod:`song.plugins`).
             params: the runtime parameters (the release's, or explicit overrides).
             max_pedestrians: rows of the ``pedestrians`` sensor (the release's largest scene).
             options: per-sensor keyword options, e.g. ``{"scan": {"n_rays": 180}}``; ``"camera"`` holds the
-                options every camera sensor shares: ``width``, ``height``, ``backend``.
+                options every camera sensor shares: ``width``, ``height``, ``backend``, ``model`` (a
+                ``camera_model`` plugin, default ``ideal``).
         """
         options = {name: dict(values) for name, values in (options or {}).items()}
         options.setdefault("pedestrians", {}).setdefault("capacity", max_pedestrians)
-        camera = options.pop("camera", {})  # width, height, backend: shared by every camera sensor
-        shared = SceneView(camera.get("backend", "auto"))
+        camera = options.pop("camera", {})  # width, height, backend, model: shared by every camera sensor
+        shared = SceneView(camera.get("backend", "auto"), camera.get("model", "ideal"))
         for name in CAMERA_SENSORS:
             options.setdefault(name, {}).update({**camera, "scene_view": shared})
             options[name].pop("backend", None)
+            options[name].pop("model", None)
         out = {}
         for name in parse_sensor_names(names):
-            out[name] = SENSORS[name](params, **options.get(name, {}))
+            out[name] = plugins.lookup("sensor", name)(params, **options.get(name, {}))
         return cls(out)
 
     @property

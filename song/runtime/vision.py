@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from song import plugins
 from song.datasets.avatars.asset import load_avatar
 from song.datasets.avatars.cache import PosedAvatar, load_compact_cache
 from song.datasets.bench.types import Episode, pedestrian_states
@@ -73,15 +74,44 @@ def _prepare(asset_path: Path | None, cache_path: Path | None) -> _Avatar:
     return _Avatar(posed, activated.scales, activated.opacities, activated.sh)
 
 
+@dataclass(frozen=True)
+class CameraContext:
+    """What a camera model may use besides the ideal image: the episode's seed, the step's time and pose."""
+
+    seed: int
+    t: float
+    pose: Pose
+
+
+class IdealCamera:
+    """The ``ideal`` camera model: the renderer's image and depth as they are (the paper's protocol)."""
+
+    name = "ideal"
+
+    def __init__(self, params: object | None = None) -> None:
+        self.params = params
+
+    def apply(self, frame: RenderOutput, context: CameraContext) -> RenderOutput:
+        """The frame unchanged."""
+        return frame
+
+
+plugins.add("camera_model", "ideal", IdealCamera)
+
+
 class SceneView:
     """Renders robot camera views of an episode (see the module docstring).
 
     Args:
-        backend: render backend (``auto`` | ``numba`` | ``gsplat``).
+        backend: render backend: ``auto`` or a ``render_backend`` plugin (``numba``, ``gsplat``, ...).
+        camera_model: a ``camera_model`` plugin, ``Model(runtime params)`` with
+            ``apply(frame, CameraContext) -> RenderOutput``; ``ideal`` leaves the render as it is.
     """
 
-    def __init__(self, backend: str = "auto") -> None:
+    def __init__(self, backend: str = "auto", camera_model: str = "ideal") -> None:
         self.backend = backend
+        self.camera_model = camera_model
+        self._model: object | None = None
         self._scenes: dict[Path | None, GaussianSet] = {}
         self._episode: Episode | None = None
         self._avatars: dict[int, _Avatar] = {}
@@ -152,5 +182,8 @@ class SceneView:
         )
         people = self.posed_avatars(self.visible_pedestrians(pose, t, cam_cfg.far_m, cam_cfg.hfov_deg), t)
         out = render([self._scenes[self._episode.gaussians_path], *people], camera, self.backend)
+        if self._model is None:
+            self._model = plugins.lookup("camera_model", self.camera_model)(self._episode.params)
+        out = self._model.apply(out, CameraContext(int(self._episode.seed), float(t), pose))
         self._last = (key, out)
         return out

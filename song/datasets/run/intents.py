@@ -7,7 +7,6 @@ fields below are stable within ``schema_version``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -21,7 +20,7 @@ class Provenance(BaseModel):
     """Who proposed an intent."""
 
     model_config = ConfigDict(extra="forbid")
-    provider: Literal["offline", "gemini", "openai"]
+    provider: str = Field(description="offline, or the `llm` plugin that proposed the routines (gemini, openai, ...)")
     model: str
     fallback: bool = Field(False, description="True when the LLM failed and the offline model was used")
     prompt_sha256: str = ""

@@ -5,8 +5,9 @@ with ``crowd.avoidance``.
 
 The simulation hands a model the pedestrians it must steer this frame -- positions, current and
 preferred velocities, body radii, speed limits -- and gets their new velocities back; walls come from
-the navmesh the model was built for. Adding a model is one class here plus one entry in
-:data:`AVOIDANCE_MODELS`. Whatever the model, the simulation afterwards keeps every move on the mesh
+the navmesh the model was built for. A model is a class ``Model(mesh, cfg)`` with the
+:class:`LocalAvoidance` methods, registered as an ``avoidance`` plugin (:mod:`song.plugins`) and named
+by ``crowd.avoidance``. Whatever the model, the simulation afterwards keeps every move on the mesh
 and resolves body overlaps, so contact (centres closer than 2 × body radius) never happens.
 
 Body and personal space are separate: the body radius (``crowd.agent_radius_m``) is what touches; in
@@ -32,12 +33,12 @@ is too narrow for it, or the crowd too dense.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Protocol
 
 import numba
 import numpy as np
 
+from song import plugins
 from song.config import CrowdConfig
 from song.geometry.navmesh import Navmesh, obstacle_rings
 from song.pipeline.crowd._orca_kernel import step_kernel
@@ -486,12 +487,10 @@ class SocialForceAvoidance:
         return new * scale[:, None]
 
 
-AVOIDANCE_MODELS: dict[str, Callable[[Navmesh, CrowdConfig], LocalAvoidance]] = {
-    "orca": OrcaAvoidance,
-    "social_force": SocialForceAvoidance,
-}
+plugins.add("avoidance", "orca", OrcaAvoidance)
+plugins.add("avoidance", "social_force", SocialForceAvoidance)
 
 
 def make_avoidance(mesh: Navmesh, cfg: CrowdConfig) -> LocalAvoidance:
-    """The model named by ``cfg.avoidance`` for ``mesh``."""
-    return AVOIDANCE_MODELS[cfg.avoidance](mesh, cfg)
+    """The model named by ``cfg.avoidance`` (a registered ``avoidance`` plugin) for ``mesh``."""
+    return plugins.lookup("avoidance", cfg.avoidance)(mesh, cfg)

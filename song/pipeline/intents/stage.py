@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from song import plugins
 from song.config import SongConfig
 from song.datasets.run import RunFolder, SceneFolder
 from song.datasets.run.intents import Intent, IntentSet, Provenance, RejectedIntent
@@ -260,12 +261,28 @@ def choose_provider(llm: str) -> str:
     return "gemini" if os.environ.get("GOOGLE_API_KEY") or os.environ.get("GEMINI_API_KEY") else "offline"
 
 
-def make_client(provider: str, config: SongConfig):
-    """The LLM client of ``provider`` ("gemini" or "openai") with the intents settings."""
+def _gemini(config: SongConfig) -> GeminiClient:
     cfg = config.intents
-    if provider == "gemini":
-        return GeminiClient(cfg.gemini_model, cfg.timeout_s, base_url=os.environ.get("SONG_GEMINI_BASE_URL"))
+    return GeminiClient(cfg.gemini_model, cfg.timeout_s, base_url=os.environ.get("SONG_GEMINI_BASE_URL"))
+
+
+def _openai(config: SongConfig) -> OpenAICompatibleClient:
+    cfg = config.intents
     return OpenAICompatibleClient(cfg.openai_base_url, cfg.openai_model, cfg.timeout_s)
+
+
+plugins.add("llm", "gemini", _gemini)
+plugins.add("llm", "openai", _openai)
+
+
+def make_client(provider: str, config: SongConfig):
+    """The LLM client of ``provider``: an ``llm`` plugin, ``factory(config) -> client``.
+
+    A client has ``provider`` and ``model`` attributes and ``request(prompt, schema) -> str`` (the reply
+    text; :class:`~song.pipeline.intents.llm.LLMError` on failure, ``TransientLLMError`` when worth
+    retrying, ``LLMRefusal`` for a safety block).
+    """
+    return plugins.lookup("llm", provider)(config)
 
 
 def _scene_summary(package: ScenePackage) -> str:
@@ -314,7 +331,7 @@ def generate_intents(
     description, llm_error, kept = "", "", None
     offline = OfflineIntentModel()
     if provider != "offline":
-        digest = ""
+        digest, client = "", None
         try:
             client = make_client(provider, config)
             proposals, description, digest = llm_proposals(package, geodesic, n, config, client, cache_dir)
@@ -326,7 +343,8 @@ def generate_intents(
                 raise LLMError(f"none of the model's {len(proposals)} routines passed the filters ({detail})")
         except (LLMError, MissingDependencyError) as exc:
             llm_error = scrub(str(exc))
-            model = config.intents.gemini_model if provider == "gemini" else config.intents.openai_model
+            builtin = {"gemini": config.intents.gemini_model, "openai": config.intents.openai_model}
+            model = getattr(client, "model", None) or builtin.get(provider, provider)
             provenance = Provenance(provider=provider, model=model, fallback=True, prompt_sha256=digest)
             kept = None
     else:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol
 
+from song import plugins
 from song.config import MotionConfig
 from song.errors import StageError
 from song.pipeline.motion.gait import generate_gait, style_for
@@ -65,9 +66,10 @@ def make_generator(cfg: MotionConfig) -> tuple[MotionGenerator, str]:
 
     ``auto`` uses Kimodo when ``kimodo`` imports and its weights are present locally, otherwise the
     procedural gait (the reason is recorded); ``kimodo`` raises :class:`StageError` when unavailable.
+    Any other name is a ``motion_generator`` plugin (:mod:`song.plugins`), built as ``Generator(cfg)``.
     """
-    if cfg.generator == "procedural":
-        return ProceduralGait(cfg), ""
+    if cfg.generator not in ("auto", "kimodo"):
+        return plugins.lookup("motion_generator", cfg.generator)(cfg), ""
     from song.pipeline.motion.kimodo import KimodoGenerator, kimodo_availability
 
     reason = kimodo_availability(cfg)
@@ -76,3 +78,12 @@ def make_generator(cfg: MotionConfig) -> tuple[MotionGenerator, str]:
     if cfg.generator == "kimodo":
         raise StageError(f"motion.generator = kimodo but Kimodo is unavailable: {reason}")
     return ProceduralGait(cfg), reason
+
+
+def _kimodo_generator(cfg: MotionConfig) -> MotionGenerator:
+    generator, _ = make_generator(cfg.model_copy(update={"generator": "kimodo"}))
+    return generator
+
+
+plugins.add("motion_generator", "procedural", ProceduralGait)
+plugins.add("motion_generator", "kimodo", _kimodo_generator)
