@@ -289,3 +289,21 @@ def test_a_sensor_registered_by_the_policys_own_file_works_in_workers(tmp_path: 
     summary = json.loads(next(out.glob("*.json")).read_text())
     assert summary["metrics"]["all"]["ERR"] == 0.0 and summary["metrics"]["all"]["n"] == 4
     plugins._REGISTRY["sensor"].pop("file_sensor", None)
+
+
+def test_collect_records_any_sensor_as_its_declared_space_says(installed: Path, tmp_path: Path) -> None:
+    """Features as data: a plugin sensor and a dict space holding images need no code in collect."""
+    out = tmp_path / "dataset"
+    _cli("collect", "--bench", GOLDEN, "--out", out, "--split", "test", "--policy", "astar", "--limit", "2",
+         "--sensors", "state,test_sensor,rgbd", "--resolution", "32x24", "--keep", "all", "-j", "2")  # fmt: skip
+    features = json.loads((out / "meta" / "info.json").read_text())["features"]
+    assert features["observation.test_sensor"] == {"dtype": "float32", "shape": [1], "names": None}
+    assert features["observation.state"]["names"][:3] == ["x", "y", "yaw"]
+    assert features["observation.images.rgbd.rgb"]["dtype"] == "video"
+    assert features["observation.rgbd.depth"]["info"] == {"height": 24, "width": 32, "unit": "m"}
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(next((out / "data").rglob("*.parquet")))
+    assert set(table.column("observation.test_sensor").to_pylist()[0]) == {1.0}
+    assert len(table.column("observation.rgbd.depth").to_pylist()[0]) == 32 * 24
+    assert len(list((out / "videos").rglob("*.mp4"))) == 2

@@ -10,10 +10,13 @@ the LeRobot dataset layout (codebase v2.1), so LeRobot's loaders and tools read 
     DS/data/chunk-000/episode_000000.parquet   one row per control step
     DS/videos/chunk-000/observation.images.rgb/episode_000000.mp4   image streams (H.264)
 
-Per step: the chosen sensors' observations *before* the action (``state`` → ``observation.state``, a
-10-vector: pose x, y, yaw, last command v, ω, goal in the robot frame x, y, goal distance and bearing,
-time; ``scan``, ``pedestrians`` → flat vectors; ``depth`` → ``observation.depth``, metres, float16,
-flattened row-major; ``rgb`` → a video), the action ``[v, ω]`` as executed (clipped to the robot's
+Per step: the chosen sensors' observations *before* the action, as features derived from each
+sensor's declared space (:func:`plan_features`; any registered sensor can be recorded): a vector
+space becomes ``observation.<sensor>`` (float32, flattened; a dict of vectors is concatenated in its
+order, e.g. ``state`` → pose x, y, yaw, last command v, ω, goal in the robot frame x, y, goal distance
+and bearing, time, named from the space); a float camera image becomes ``observation.<sensor>``
+(float16, flattened row-major, its height, width and unit in the feature's ``info``); a colour image
+becomes a video ``observation.images.<sensor>``. Then the action ``[v, ω]`` as executed (clipped to the robot's
 limits), the reward terms of the Gymnasium env (progress toward the goal, ±10 at success / collision)
 and their sum, and the done flags. By default only successful rollouts are written (``keep="success"``,
 what behaviour cloning wants); ``keep="all"`` writes every one (``next.success`` tells them apart).
@@ -41,14 +44,12 @@ from song.runtime.env import reward_terms
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.loop import EpisodeRunner, run_episode
 from song.runtime.policies import load_policy, policy_sensors
-from song.runtime.sensors import SensorSuite, parse_sensor_names
+from song.runtime.sensors import Box, SensorSuite, parse_sensor_names
 from song.util import write_json_atomic, write_text_atomic
 
 CODEBASE_VERSION = "v2.1"
 CHUNK_SIZE = 1000
 TASK = "navigate to the goal among pedestrians"
-STATE_NAMES = ["x", "y", "yaw", "v", "omega", "goal_x", "goal_y", "goal_distance", "goal_bearing", "t"]
-COLLECTABLE = ("state", "scan", "pedestrians", "rgb", "depth")
 DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
 VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
 
@@ -64,34 +65,84 @@ class CollectSummary:
     rollouts: int
 
 
-def _flat_state(obs: dict[str, np.ndarray]) -> np.ndarray:
-    return np.concatenate([obs["pose"], obs["velocity"], obs["goal"], obs["goal_polar"], obs["t"]]).astype(np.float32)
+@dataclass(frozen=True)
+class FeaturePlan:
+    """How one sensor (or one entry of a sensor's dict space) is stored: its LeRobot key and declaration."""
+
+    key: str
+    sensor: str
+    entries: tuple[str, ...]  # the dict entries concatenated, () for a plain Box
+    kind: str  # "vector" (float32), "depth" (float16 image) or "video" (uint8 colour image)
+    spec: dict[str, Any]
+
+    def extract(self, observation: dict[str, Any]) -> np.ndarray:
+        """This feature's value at one step, in its stored dtype (a video frame stays (H, W, 3))."""
+        value = observation[self.sensor]
+        if self.entries and self.kind != "vector":  # an image entry of a dict space
+            value = value[self.entries[0]]
+        elif self.entries:
+            value = np.concatenate([np.asarray(value[e], np.float64).ravel() for e in self.entries])
+        if self.kind == "video":
+            return np.asarray(value, np.uint8)
+        return np.asarray(value, np.float16 if self.kind == "depth" else np.float32).ravel()
 
 
-def _features(episode: dict[str, np.ndarray], sensors: tuple[str, ...], fps: float) -> dict[str, dict]:
-    """LeRobot feature declarations, shapes read from the first collected episode."""
-    out: dict[str, dict] = {}
-    if "state" in sensors:
-        out["observation.state"] = {"dtype": "float32", "shape": [len(STATE_NAMES)], "names": STATE_NAMES}
-    for name in ("scan", "pedestrians"):
-        if name in sensors:
-            out[f"observation.{name}"] = {"dtype": "float32", "shape": [int(episode[name].shape[1])], "names": None}
-    if "depth" in sensors:
-        h, w = episode["depth_hw"]
-        out["observation.depth"] = {
-            "dtype": "float16",
-            "shape": [h * w],
-            "names": None,
-            "info": {"height": h, "width": w, "unit": "m"},
-        }
-    if "rgb" in sensors:
-        h, w = episode["rgb"].shape[1:3]
-        out["observation.images.rgb"] = {
-            "dtype": "video",
-            "shape": [h - h % 2, w - w % 2, 3],
-            "names": ["height", "width", "channels"],
-            "info": {"video.fps": fps, "video.codec": "h264", "video.pix_fmt": "yuv420p", "has_audio": False},
-        }
+def _leaf_names(key: str, box: Box) -> list[str]:
+    size = int(np.prod(box.shape))
+    return (
+        list(box.names)
+        if box.names and len(box.names) == size
+        else [key]
+        if size == 1
+        else [f"{key}_{i}" for i in range(size)]
+    )
+
+
+def _plan(sensor: str, key: str, box: Box, fps: float) -> FeaturePlan:
+    if box.image and np.dtype(box.dtype) == np.uint8:
+        h, w = box.shape[:2]
+        spec = {"dtype": "video", "shape": [h - h % 2, w - w % 2, 3], "names": ["height", "width", "channels"],
+                "info": {"video.fps": fps, "video.codec": "h264", "video.pix_fmt": "yuv420p", "has_audio": False}}  # fmt: skip
+        return FeaturePlan(f"observation.images.{key}", sensor, (), "video", spec)
+    if box.image:
+        h, w = box.shape[:2]
+        info = {"height": h, "width": w, **({"unit": box.unit} if box.unit else {})}
+        return FeaturePlan(
+            f"observation.{key}",
+            sensor,
+            (),
+            "depth",
+            {"dtype": "float16", "shape": [h * w], "names": None, "info": info},
+        )
+    names = list(box.names) if box.names else None
+    spec = {"dtype": "float32", "shape": [int(np.prod(box.shape))], "names": names}
+    return FeaturePlan(f"observation.{key}", sensor, (), "vector", spec)
+
+
+def plan_features(suite: SensorSuite, chosen: tuple[str, ...], fps: float) -> list[FeaturePlan]:
+    """The dataset features of the chosen sensors, read from their declared spaces (LeRobot's rule).
+
+    A dict space of vectors becomes one concatenated vector named from its entries; a dict holding
+    images becomes one feature per entry (``observation.<sensor>.<entry>``).
+    """
+    plans = []
+    for name in chosen:
+        space = suite.sensors[name].space()
+        if not isinstance(space, dict):
+            plans.append(_plan(name, name, space, fps))
+        elif not any(box.image for box in space.values()):
+            names = [n for key, box in space.items() for n in _leaf_names(key, box)]
+            spec = {"dtype": "float32", "shape": [len(names)], "names": names}
+            plans.append(FeaturePlan(f"observation.{name}", name, tuple(space), "vector", spec))
+        else:
+            for key, box in space.items():
+                plans.append(dataclasses.replace(_plan(name, f"{name}.{key}", box, fps), entries=(key,)))
+    return plans
+
+
+def _features(plans: list[FeaturePlan]) -> dict[str, dict]:
+    """LeRobot feature declarations: the sensors' (from their spaces), then the action, rewards and indices."""
+    out: dict[str, dict] = {plan.key: plan.spec for plan in plans}
     out["action"] = {"dtype": "float32", "shape": [2], "names": ["v", "omega"]}
     for name in ("next.reward", "reward.progress", "reward.terminal", "timestamp"):
         out[name] = {"dtype": "float32", "shape": [1], "names": None}
@@ -141,7 +192,8 @@ def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:
     recorder = _Recorder(load_policy(job.policy))
     names = tuple(dict.fromkeys([*policy_sensors(recorder.policy), *job.sensors]))
     suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, {"camera": dict(job.camera)})
-    steps: dict[str, list] = {k: [] for k in (*COLLECTABLE, "action", "progress", "terminal")}
+    plans = plan_features(suite, job.sensors, float(bench.params.robot.control_hz))
+    steps: dict[str, list] = {k: [] for k in (*(p.key for p in plans), "action", "progress", "terminal")}
 
     def record(runner: EpisodeRunner) -> None:
         obs = recorder.observation
@@ -150,47 +202,29 @@ def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:
         steps["progress"].append(progress)
         steps["terminal"].append(terminal)
         steps["action"].append(np.asarray(runner.command, np.float32))
-        if "state" in job.sensors:
-            steps["state"].append(_flat_state(obs["state"]))
-        for name in ("scan", "pedestrians"):
-            if name in job.sensors:
-                steps[name].append(np.asarray(obs[name], np.float32).ravel())
-        if "depth" in job.sensors:
-            steps["depth"].append(np.asarray(obs["depth"], np.float16))
-        if "rgb" in job.sensors:
-            steps["rgb"].append(np.asarray(obs["rgb"], np.uint8))
+        for plan in plans:
+            steps[plan.key].append(plan.extract(obs))
 
     result = run_episode(episode, recorder, make_collider(episode), suite, record, job.step_timeout_s)
     out: dict[str, Any] = {"episode_id": job.episode_id, "difficulty": episode.difficulty, "outcome": result.outcome}
     for name, values in steps.items():
         if values:
             out[name] = np.stack(values)
-    if "depth" in out:
-        out["depth_hw"] = out["depth"].shape[1:]
-        out["depth"] = out["depth"].reshape(len(out["depth"]), -1)
     out["steps"] = len(steps["action"])
+    out["plans"] = plans
     return out
 
 
-def _table(episode: dict[str, Any], sensors: tuple[str, ...], episode_index: int, first_index: int, fps: float):
+def _table(episode: dict[str, Any], episode_index: int, first_index: int, fps: float):
     import pyarrow as pa
 
     n = episode["steps"]
     success = episode["outcome"] == "success"
     cols: dict[str, Any] = {}
-    if "state" in sensors:
-        cols["observation.state"] = pa.FixedSizeListArray.from_arrays(
-            pa.array(episode["state"].ravel()), len(STATE_NAMES)
-        )
-    for name in ("scan", "pedestrians"):
-        if name in sensors:
-            cols[f"observation.{name}"] = pa.FixedSizeListArray.from_arrays(
-                pa.array(episode[name].ravel()), episode[name].shape[1]
-            )
-    if "depth" in sensors:
-        cols["observation.depth"] = pa.FixedSizeListArray.from_arrays(
-            pa.array(episode["depth"].ravel()), episode["depth"].shape[1]
-        )
+    for plan in episode["plans"]:
+        if plan.kind != "video":
+            values = episode[plan.key]
+            cols[plan.key] = pa.FixedSizeListArray.from_arrays(pa.array(values.ravel()), values.shape[1])
     cols["action"] = pa.FixedSizeListArray.from_arrays(pa.array(episode["action"].ravel()), 2)
     progress = np.asarray(episode["progress"], np.float32)
     terminal = np.asarray(episode["terminal"], np.float32)
@@ -245,7 +279,7 @@ def collect(
         policy_name: the expert: a baseline name or ``module:Class``.
         out: the dataset folder to create (must not exist or be empty).
         split: which split's episodes.
-        sensors: what to record (see ``COLLECTABLE``).
+        sensors: what to record: any sensors (their declared spaces decide how, :func:`plan_features`).
         limit: only the first N episodes of the split.
         camera: camera sensors' options (``width``, ``height``, ``backend``).
         keep: ``success`` writes only successful rollouts (what behaviour cloning wants), ``all`` every one.
@@ -260,10 +294,7 @@ def collect(
 
     from song.parallel import parallel_map
 
-    chosen = parse_sensor_names(sensors)
-    unknown = [s for s in chosen if s not in COLLECTABLE]
-    if unknown:
-        raise SongError(f"collect: sensor '{unknown[0]}' cannot be recorded; use any of {', '.join(COLLECTABLE)}")
+    chosen = parse_sensor_names(sensors)  # any registered sensor: its space says how it is stored
     if keep not in ("success", "all"):
         raise SongError(f"collect: --keep {keep!r}: use success or all")
     out = Path(out)
@@ -281,26 +312,25 @@ def collect(
     ]
     done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
     features: dict[str, dict] | None = None
-    lines, stats_lines, total, successes, index = [], [], 0, 0, 0
+    lines, stats_lines, total, successes, index, videos = [], [], 0, 0, 0, 0
     for episode in episodes:
         result = done[episode.episode_id]
         successes += result["outcome"] == "success"
         if result["steps"] == 0 or (keep == "success" and result["outcome"] != "success"):
             continue
-        features = features or _features(result, chosen, fps)
+        features = features or _features(result["plans"])
         chunk = index // CHUNK_SIZE
-        table = _table(result, chosen, index, total, fps)
+        table = _table(result, index, total, fps)
         path = out / DATA_PATH.format(episode_chunk=chunk, episode_index=index)
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, path, compression="zstd")
-        if "rgb" in chosen:
+        for plan in (p for p in result["plans"] if p.kind == "video"):
             from song.render.video import write_mp4
 
-            video = out / VIDEO_PATH.format(
-                episode_chunk=chunk, video_key="observation.images.rgb", episode_index=index
-            )
+            video = out / VIDEO_PATH.format(episode_chunk=chunk, video_key=plan.key, episode_index=index)
             video.parent.mkdir(parents=True, exist_ok=True)
-            write_mp4(video, result["rgb"], fps)
+            write_mp4(video, result[plan.key], fps)
+            videos += 1
         lines.append(
             {"episode_index": index, "tasks": [TASK], "length": result["steps"], "song_episode_id": episode.episode_id,
              "outcome": result["outcome"], "difficulty": result["difficulty"]}
@@ -314,13 +344,13 @@ def collect(
         "total_episodes": len(lines),
         "total_frames": total,
         "total_tasks": 1,
-        "total_videos": len(lines) if "rgb" in chosen else 0,
+        "total_videos": videos,
         "total_chunks": max(1, (len(lines) - 1) // CHUNK_SIZE + 1),
         "chunks_size": CHUNK_SIZE,
         "fps": fps,
         "splits": {split: f"0:{len(lines)}"},
         "data_path": DATA_PATH,
-        "video_path": VIDEO_PATH if "rgb" in chosen else None,
+        "video_path": VIDEO_PATH if videos else None,
         "features": features or {},
         "song": {
             "release": str(bench.version),

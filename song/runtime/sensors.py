@@ -45,12 +45,20 @@ MAX_TIME_S = 1.0e4  # bound of the scenario time in the state space
 
 @dataclass(frozen=True)
 class Box:
-    """A Gymnasium ``Box`` declared as data: bounds (scalars or arrays), shape and dtype."""
+    """A Gymnasium ``Box`` declared as data: bounds (scalars or arrays), shape and dtype.
+
+    Datasets (``song collect``) read their features from these declarations: ``names`` label the
+    entries of a vector, ``unit`` says what its numbers measure, and ``image`` marks a camera image
+    ((H, W) or (H, W, 3) pixels).
+    """
 
     low: float | np.ndarray
     high: float | np.ndarray
     shape: tuple[int, ...]
     dtype: type = np.float64
+    names: tuple[str, ...] | None = None
+    unit: str = ""
+    image: bool = False
 
     def contains(self, value: np.ndarray) -> bool:
         """True when ``value`` has the shape and dtype and lies within the bounds."""
@@ -134,11 +142,15 @@ class StateSensor(Sensor):
         max_w = float(np.deg2rad(robot.max_yaw_rate_deg_s))
         big = GOAL_RANGE_M
         return {
-            "pose": Box(np.array([-big, -big, -np.pi]), np.array([big, big, np.pi]), (3,)),
-            "velocity": Box(np.array([0.0, -max_w]), np.array([robot.max_speed_mps, max_w]), (2,)),
-            "goal": Box(-big, big, (2,)),
-            "goal_polar": Box(np.array([0.0, -np.pi]), np.array([2 * big, np.pi]), (2,)),
-            "t": Box(0.0, MAX_TIME_S, (1,)),
+            "pose": Box(np.array([-big, -big, -np.pi]), np.array([big, big, np.pi]), (3,), names=("x", "y", "yaw")),
+            "velocity": Box(
+                np.array([0.0, -max_w]), np.array([robot.max_speed_mps, max_w]), (2,), names=("v", "omega")
+            ),
+            "goal": Box(-big, big, (2,), names=("goal_x", "goal_y")),
+            "goal_polar": Box(
+                np.array([0.0, -np.pi]), np.array([2 * big, np.pi]), (2,), names=("goal_distance", "goal_bearing")
+            ),
+            "t": Box(0.0, MAX_TIME_S, (1,), names=("t",), unit="s"),
         }
 
     @override
@@ -171,7 +183,7 @@ class ScanSensor(Sensor):
 
     @override
     def space(self) -> Box:
-        return Box(0.0, self.max_range_m, (self.n_rays,))
+        return Box(0.0, self.max_range_m, (self.n_rays,), unit="m")
 
     @override
     def observe(self, view: RobotView) -> np.ndarray:
@@ -253,10 +265,10 @@ class CameraSensor(Sensor):
         return out
 
     def _rgb_space(self) -> Box:
-        return Box(0, 255, (self.height, self.width, 3), np.uint8)
+        return Box(0, 255, (self.height, self.width, 3), np.uint8, image=True)
 
     def _depth_space(self) -> Box:
-        return Box(0.0, float(self.params.camera.far_m), (self.height, self.width), np.float32)
+        return Box(0.0, float(self.params.camera.far_m), (self.height, self.width), np.float32, unit="m", image=True)
 
     @override
     def describe(self) -> dict[str, Any]:
