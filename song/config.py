@@ -1,4 +1,4 @@
-"""Typed configuration for every stage; defaults are the paper's values (DESIGN §9).
+"""Typed configuration for every stage; defaults are the paper's values.
 
 One pydantic model per stage, ``extra="forbid"``, every field with a description, a unit and bounds.
 :func:`load_config` reads TOML or YAML; :func:`config_hash` is recorded in every output.
@@ -175,7 +175,7 @@ class GradingConfig(_Section):
 
 
 class RobotConfig(_Section):
-    """Robot and evaluation loop (paper: Setup; DESIGN §8)."""
+    """Robot and evaluation loop (paper: Setup)."""
 
     max_speed_mps: float = Field(0.5, gt=0.0, description="linear speed limit, m/s")
     max_yaw_rate_deg_s: float = Field(45.0, gt=0.0, description="angular speed limit, deg/s")
@@ -204,7 +204,7 @@ class CameraConfig(_Section):
 
 
 class SongConfig(_Section):
-    """Everything a run needs. ``seed`` is the one run seed (DESIGN §3)."""
+    """Everything a run needs. ``seed`` is the one run seed."""
 
     seed: int = Field(0, ge=0, description="run seed")
     scenes: ScenesConfig = ScenesConfig()

@@ -82,8 +82,8 @@ os.umask(_UMASK)  # read the process umask once (os.umask is the only way to rea
 def atomic_writer(path: str | Path, mode: str = "wb") -> Iterator[io.IOBase]:
     """Open a temporary file next to ``path``; on success fsync it and rename it over ``path``.
 
-    A crash at any moment leaves either the old file or the new one, never a half-written file
-    (DESIGN §3). On an exception the temporary file is removed and ``path`` is untouched.
+    A crash at any moment leaves either the old file or the new one, never a half-written file. On an
+    exception the temporary file is removed and ``path`` is untouched.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -266,7 +266,7 @@ def write_npz_compressed_atomic(path: str | Path, **arrays: np.ndarray) -> None:
 def derive_seed(*parts: object) -> int:
     """A 64-bit seed from a hash of ``parts`` (run seed, scene id, stage name, item id, ...).
 
-    DESIGN §3: every stage draws from a generator seeded by such a hash, so results never depend on
+    every stage draws from a generator seeded by such a hash, so results never depend on
     worker count, order or executor.
     """
     text = "\x1f".join(str(part) for part in parts)

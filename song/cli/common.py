@@ -31,6 +31,15 @@ SetOption = typer.Option(
     help="override one config value (repeatable), e.g. crowd.agent_radius_m=0.3",
 )
 WorkersOption = typer.Option(0, "--workers", "-j", min=0, help="worker processes (0 = all cores)")
+
+
+def resolve_workers(workers: int) -> int:
+    """``--workers``: 0 means every core this process may use (outputs never depend on the count)."""
+    from song.parallel import default_workers
+
+    return workers or default_workers()
+
+
 BenchOption = typer.Option(None, "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder")
 # the benchmark as a bare first argument, as `song viz` took it before every command but `song bench …`
 # took --bench: still accepted, not advertised

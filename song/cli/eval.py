@@ -8,7 +8,16 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from song.cli import app
-from song.cli.common import ConfigOption, SetOption, console, err_console, handle_errors, parse_size
+from song.cli.common import (
+    ConfigOption,
+    SetOption,
+    WorkersOption,
+    console,
+    err_console,
+    handle_errors,
+    parse_size,
+    resolve_workers,
+)
 
 
 @app.command("eval")
@@ -38,7 +47,7 @@ def eval_command(
         "ideal", "--camera-model", help="what the camera does to the ideal image: ideal | a camera_model plugin"
     ),
     out: Path = typer.Option(Path("runs/eval"), "--out", help="results folder"),
-    workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
+    workers: int = WorkersOption,
     step_timeout: float = typer.Option(
         5.0, "--step-timeout", min=0.01, help="a policy call taking longer fails its episode (outcome error), s"
     ),
@@ -82,7 +91,7 @@ def eval_command(
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:
             task = progress.add_task(name, total=total)
-            for result in iter_eval(release, setup, episodes, workers):
+            for result in iter_eval(release, setup, episodes, resolve_workers(workers)):
                 results.append(result)
                 progress.advance(task)
         table[name] = write_results(out, setup, results, release)["metrics"]
@@ -106,14 +115,16 @@ def collect_command(
     resolution: str = typer.Option("160x120", "--resolution", metavar="WxH", help="camera image size"),
     limit: int | None = typer.Option(None, "--limit", min=1, help="only the first N episodes of the split"),
     keep: str = typer.Option("success", "--keep", help="success (only successful rollouts) | all"),
-    workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes"),
+    workers: int = WorkersOption,
 ) -> None:
     """Roll a policy out on training episodes; write what imitation learning needs (LeRobot dataset layout)."""
     from song.runtime.collect import collect
 
     width, height = parse_size(resolution, "--resolution")
     camera = {"width": width, "height": height}
-    summary = collect(bench, policy, out, split, tuple(sensors.split(",")), limit, camera, keep, workers)
+    summary = collect(
+        bench, policy, out, split, tuple(sensors.split(",")), limit, camera, keep, resolve_workers(workers)
+    )
     console.print(
         f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "
         f"{summary.frames} steps"

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from song.cli import app
-from song.cli.common import SetOption, console, handle_errors, status_table
+from song.cli.common import SetOption, WorkersOption, console, handle_errors, resolve_workers, status_table
 
 
 @app.command("grade")
@@ -15,7 +15,7 @@ from song.cli.common import SetOption, console, handle_errors, status_table
 def grade(
     run: Path = typer.Option(..., "--run", help="run folder made by song synth"),
     episodes: int | None = typer.Option(None, "--episodes", min=1, help="total episodes (default: config, 500)"),
-    workers: int = typer.Option(1, "--workers", "-j", min=1, help="worker processes (scenes in parallel)"),
+    workers: int = WorkersOption,
     split: str | None = typer.Option(
         None, "--split", help="whole scenes per split by shares, e.g. train:val:test=8:1:1 (default: all test)"
     ),
@@ -35,7 +35,9 @@ def grade(
     config = _grading_config(run, sets) if sets else None
     extra = {k: v for k, v in (("train", train_episodes), ("val", val_episodes)) if v}
     splits = parse_splits(split) if split else None
-    result = grade_run(run, config, n_episodes=episodes, workers=workers, splits=splits, split_episodes=extra)
+    result = grade_run(
+        run, config, n_episodes=episodes, workers=resolve_workers(workers), splits=splits, split_episodes=extra
+    )
     rows = [{"difficulty": d, **{m: str(c) for m, c in modes.items()}} for d, modes in result.summary["counts"].items()]
     modes = list(next(iter(result.summary["counts"].values())).keys())
     console.print(

@@ -88,7 +88,7 @@ def import_scenes(
     kind: str = typer.Argument(..., help="procthor | interiorgs"),
     src: Path = typer.Argument(..., help="house JSON, a folder of them, or a .jsonl/.jsonl.gz"),
     out: Path = typer.Option(..., "--out", help="folder for the scene packages"),
-    resolution: float = typer.Option(0.05, "--resolution", min=0.01, max=0.5, help="occupancy cell size, m"),
+    cell_size: float = typer.Option(0.05, "--cell-size", min=0.01, max=0.5, help="occupancy cell size, m"),
     assets: Path | None = typer.Option(
         None, "--assets", help="ProcTHOR asset database JSON (default: the procthor package's)"
     ),
@@ -99,9 +99,7 @@ def import_scenes(
     if kind == "procthor":
         from song.datasets.scenes.procthor import import_procthor
 
-        results = import_procthor(
-            src, out, resolution=resolution, assets=assets, splat=splat, spacing=_spacing(spacing)
-        )
+        results = import_procthor(src, out, resolution=cell_size, assets=assets, splat=splat, spacing=_spacing(spacing))
         for result in results:
             if result.warning:
                 console.print(f"[yellow]warning[/yellow] {result.warning}", soft_wrap=True)

@@ -46,7 +46,7 @@ def view(
     scene: Path = typer.Argument(..., help="scene package folder with a Gaussian scene"),
     out: Path = typer.Option(None, "--out", help="PNG path (default: <scene>-view.png here)"),
     pose: str | None = typer.Option(None, "--pose", help="X,Y,YAW (m, m, rad); default: a pose that sees much"),
-    size: str = typer.Option("960x540", "--size", help="WxH, px"),
+    resolution: str = typer.Option("960x540", "--resolution", metavar="WxH", help="image size, px"),
 ) -> None:
     """What a camera 1.2 m above the floor sees of the scene's Gaussians."""
     from song.cli.common import parse_size
@@ -59,7 +59,7 @@ def view(
         except ValueError as exc:
             raise typer.BadParameter(f"--pose {pose!r}: expected X,Y,YAW") from exc
         xyz = (x, y, yaw)
-    width, height = parse_size(size, "--size")
+    width, height = parse_size(resolution, "--resolution")
     _report([render_view(scene, out or Path(f"{scene.name}-view.png"), xyz, width, height)])
 
 
@@ -107,14 +107,18 @@ def pov(
     episode_id: str = typer.Option(..., "--episode", help="episode id"),
     policy: str = typer.Option("depth", "--policy", help="straight | astar | social | depth | module:Class"),
     out: Path = typer.Option(Path("runs/viz"), "--out", help="output folder"),
-    size: str = typer.Option("320x240", "--size", help="camera image size WxH, px"),
-    backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat"),
+    resolution: str = typer.Option("320x240", "--resolution", metavar="WxH", help="camera image size, px"),
+    backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat | a render_backend plugin"),
 ) -> None:
     """First-person video of a policy on an episode: RGB | depth | top-down (H.264) and a PNG strip."""
     from song.cli.common import parse_size
     from song.viz.pov import render_pov
 
-    _report(render_pov(bench_location(positional, bench), episode_id, policy, out, parse_size(size, "--size"), backend))
+    _report(
+        render_pov(
+            bench_location(positional, bench), episode_id, policy, out, parse_size(resolution, "--resolution"), backend
+        )
+    )
 
 
 @viz_app.command("bench")

@@ -1,1 +1,1 @@
-"""Pure math over numpy/torch arrays. Imports nothing else of ``song`` (DESIGN §2)."""
+"""Pure math over numpy/torch arrays. Imports nothing else of ``song``."""

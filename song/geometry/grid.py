@@ -1,4 +1,4 @@
-"""Occupancy-grid coordinates (DESIGN §4.1): image rows are north-up.
+"""Occupancy-grid coordinates: image rows are north-up.
 
 Cell (row r, col c) of a ``rows``-row grid covers x = x_min + (c + ½)·res,
 y = y_min + (rows − 1 − r + ½)·res. All functions are vectorised over points.

@@ -1,4 +1,4 @@
-"""Batched linear blend skinning of Gaussians over frames (DESIGN §5.4).
+"""Batched linear blend skinning of Gaussians over frames.
 
 For Gaussian ``g`` with top-4 joints ``j_k`` and weights ``w_k`` and skinning transforms ``A_j = [R_j |
 t_j]`` (:func:`song.geometry.fk.skinning_transforms`):

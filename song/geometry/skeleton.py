@@ -1,9 +1,9 @@
-"""The 24-joint SMPL topology with our own procedural rest proportions (DESIGN §5.3).
+"""The 24-joint SMPL topology with our own procedural rest proportions.
 
 Joint names and parent indices of SMPL are public facts. The rest offsets are NOT taken from any
 licensed SMPL model file: they are our own proportions of a standing human, as fractions of body
 height, in the body frame used everywhere in SONG: **x forward, y left, z up**, feet on z = 0,
-T-pose (arms along ±y). Heading θ of a body is the yaw of its +x axis (DESIGN §3).
+T-pose (arms along ±y). Heading θ of a body is the yaw of its +x axis.
 """
 
 from __future__ import annotations

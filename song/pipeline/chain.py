@@ -1,4 +1,4 @@
-"""Stage registry, per-scene stage cache (content hashes) and the run loop (DESIGN §2, §3).
+"""Stage registry, per-scene stage cache (content hashes) and the run loop.
 
 A *stage* turns a scene's earlier artifacts into new files under ``RUN/scenes/<scene_id>/``. Each
 scene keeps a ``stages.json`` recording, per stage, the input hash (package files + earlier stages'
@@ -283,7 +283,7 @@ def run_scene(
         start = time.perf_counter()
         try:
             output = _run_stage(stage, ctx)
-        except Exception as exc:  # a bad scene fails alone (DESIGN §3)
+        except Exception as exc:  # a bad scene fails alone
             seconds = time.perf_counter() - start
             message = str(exc) if isinstance(exc, SongError) else f"{type(exc).__name__}: {exc}"
             record[stage.name] = {
@@ -333,7 +333,7 @@ def iter_run(
 
     A scene is the unit of work, mapped by :func:`song.parallel.parallel_map` (``serial``, a local
     ``process`` pool of ``workers``, or ``dask`` at ``scheduler``). Outputs do not depend on the
-    executor, the worker count or the completion order (DESIGN §3).
+    executor, the worker count or the completion order.
     """
     check_plugin_names(config)  # an unknown name fails here, before anything is written
     run = RunFolder(Path(run_dir))

@@ -1,4 +1,4 @@
-"""Gaussian-splat rendering of RGB-D views (DESIGN §11): cameras, activated Gaussian sets, backends.
+"""Gaussian-splat rendering of RGB-D views: cameras, activated Gaussian sets, backends.
 
 A layer of its own: imports only :mod:`song.geometry` (and numpy/numba); the runtime and the pictures
 use it.

@@ -1,4 +1,4 @@
-"""Pinhole cameras with OpenCV axes (x right, y down, z forward), posed from a robot pose (DESIGN §11).
+"""Pinhole cameras with OpenCV axes (x right, y down, z forward), posed from a robot pose.
 
 A robot at (x, y) facing yaw θ (CCW from +x, Z up) carries its camera ``height`` metres above the
 floor, looking horizontally along its heading: the camera's z axis is (cos θ, sin θ, 0), x (right)

@@ -1,4 +1,4 @@
-"""Activated 3D Gaussians, ready to render (DESIGN §11).
+"""Activated 3D Gaussians, ready to render.
 
 A Gaussian set holds what the rasterizer consumes: means, unit wxyz rotations, *linear* scales,
 opacities in [0, 1] and colours as spherical-harmonic coefficients (degree 0 to 3). A scene is

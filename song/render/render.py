@@ -1,4 +1,4 @@
-"""``render(gaussians, camera) -> RenderOutput``: RGB-D images of Gaussian splats (DESIGN §11).
+"""``render(gaussians, camera) -> RenderOutput``: RGB-D images of Gaussian splats.
 
 Backends behind one call, the same inputs and outputs:
 

@@ -1,4 +1,4 @@
-"""``song eval``: run a policy over a release's episodes; per-episode Parquet + summary (DESIGN §8).
+"""``song eval``: run a policy over a release's episodes; per-episode Parquet + summary.
 
 Every result file records what produced it: the release (version, schema, fingerprint), the policy,
 the sensors with their parameters, the runtime parameters used, and any override of the release's

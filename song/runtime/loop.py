@@ -1,4 +1,4 @@
-"""The closed-loop episode runner (DESIGN §8; paper "Evaluation protocol").
+"""The closed-loop episode runner (paper "Evaluation protocol").
 
 Per control step: observe (the selected sensors) → act → clip to the robot's limits → integrate.
 Static contact restores the last safe pose and counts C_obs (at δ_obs the episode fails); a robot

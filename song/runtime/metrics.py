@@ -1,4 +1,4 @@
-"""Social-navigation metrics as pure functions over arrays (DESIGN §8; paper "Evaluation metrics").
+"""Social-navigation metrics as pure functions over arrays (paper "Evaluation metrics").
 
 Choices (also in docs/metrics.md):
 - Every episode has exactly one outcome: success, obstacle (C_obs ≥ δ_obs), human (any avatar

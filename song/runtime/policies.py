@@ -1,4 +1,4 @@
-"""The ``Policy`` protocol and the built-in baselines (DESIGN §8; paper Table 2 rows).
+"""The ``Policy`` protocol and the built-in baselines (paper Table 2 rows).
 
 - ``straight``: turn toward the goal and drive (blind to walls and people).
 - ``astar``: pure pursuit of the episode's smoothed A* path (blind to people).

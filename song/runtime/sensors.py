@@ -1,4 +1,4 @@
-"""Sensors: the composable parts of an observation (DESIGN §11 "Sensors").
+"""Sensors: the composable parts of an observation ("Sensors").
 
 An observation is a dict of named sensor outputs. Each sensor declares its Gymnasium space as a
 :class:`Box` (or a dict of them) without importing Gymnasium, is reset once per episode, and reads

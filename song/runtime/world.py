@@ -9,7 +9,7 @@ from song.geometry.freespace import clearance_field
 
 
 class StaticWorld:
-    """Occupancy queries for the robot (DESIGN §8 "static collision: robot disc against the grid").
+    """Occupancy queries for the robot ("static collision: robot disc against the grid").
 
     ``clearance`` holds, per cell centre, the distance in metres to the nearest non-free cell's
     boundary (Euclidean distance transform minus half a cell); outside the grid counts as occupied.

@@ -82,7 +82,7 @@ def test_viz_pov_writes_an_h264_video_and_a_strip(tmp_path: Path) -> None:
 
     result = CliRunner().invoke(
         app,
-        ["viz", "pov", "--bench", str(GOLDEN), "--episode", "scene_0-001", "--policy", "straight", "--size", "96x72",
+        ["viz", "pov", "--bench", str(GOLDEN), "--episode", "scene_0-001", "--policy", "straight", "--resolution", "96x72",
          "--out", str(tmp_path)],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
@@ -105,7 +105,7 @@ def test_viz_view_renders_a_room(tmp_path: Path) -> None:
 
     root = generate_scene("office_0000", "office", 1, tmp_path / "scenes", True, 0.1)
     out = tmp_path / "view.png"
-    result = CliRunner().invoke(app, ["viz", "view", str(root), "--out", str(out), "--size", "160x90"])
+    result = CliRunner().invoke(app, ["viz", "view", str(root), "--out", str(out), "--resolution", "160x90"])
     assert result.exit_code == 0, result.output
     image = _check(out, min_size=90)
     assert (image.max(axis=-1) > 40).mean() > 0.98  # a closed room: surfaces everywhere, no void

@@ -1,4 +1,4 @@
-"""Avatar asset format (DESIGN §5.4): one identity per file, canonical Gaussians plus skinning.
+"""Avatar asset format: one identity per file, canonical Gaussians plus skinning.
 
 An asset file ``<avatar_id>.avatar.npz`` (uncompressed npz, no pickles) holds:
 

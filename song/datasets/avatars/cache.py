@@ -1,4 +1,4 @@
-"""Animated-avatar caches (DESIGN §7): the compact default and the paper's materialised form.
+"""Animated-avatar caches: the compact default and the paper's materialised form.
 
 **Compact** ``binding/traj_{id}.npz`` (``song.lbs_cache/1``, deflated npz) — kilobytes per pedestrian;
 LBS runs at query time:

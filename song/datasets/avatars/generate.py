@@ -1,4 +1,4 @@
-"""Procedural Gaussian avatars: anthropometric bodies with faces, hands, hair and shaded clothing (DESIGN §5.4).
+"""Procedural Gaussian avatars: anthropometric bodies with faces, hands, hair and shaded clothing.
 
 The body is a set of surfaces around the bones of :func:`song.geometry.skeleton.rest_joints` in the
 T-pose — tapered elliptic tubes for the torso, limbs and fingers, ellipsoids for the head, nose, ears,

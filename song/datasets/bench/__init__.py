@@ -1,4 +1,4 @@
-"""Benchmark releases: Parquet tables, versions, verify, load API (DESIGN §7).
+"""Benchmark releases: Parquet tables, versions, verify, load API.
 
 ``song.datasets.bench.open(path, version=None)`` is the runtime's entry point.
 """

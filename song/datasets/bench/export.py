@@ -1,4 +1,4 @@
-"""``song export-bench``: a run's graded episodes → one immutable versioned release (DESIGN §7).
+"""``song export-bench``: a run's graded episodes → one immutable versioned release.
 
 The release is built in a hidden temporary folder beside the target and renamed into place at the
 end, so an interrupted export leaves no half version visible; an existing version is never touched.

@@ -1,4 +1,4 @@
-"""``meta/info.json`` of a release, as a validated pydantic model (DESIGN §7)."""
+"""``meta/info.json`` of a release, as a validated pydantic model."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Load API for the runtime: ``song.datasets.bench.open(path, version=None)`` (DESIGN §7).
+"""Load API for the runtime: ``song.datasets.bench.open(path, version=None)``.
 
 Reads only the release's own files; never imports ``song.pipeline``.
 """

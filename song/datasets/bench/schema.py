@@ -1,4 +1,4 @@
-"""Every Parquet schema, column name, path template and the format version of a release (DESIGN §7).
+"""Every Parquet schema, column name, path template and the format version of a release.
 
 One module holds the on-disk format (STYLE: "the on-disk format is data"). Bump ``SCHEMA_VERSION``'s
 major number for any change an older reader cannot handle; minor for additive columns.

@@ -1,4 +1,4 @@
-"""Typed episodes that a benchmark release hands to the runtime (DESIGN §7, §8).
+"""Typed episodes that a benchmark release hands to the runtime.
 
 CONTRACT between ``song.datasets.bench`` (which builds these from Parquet + blobs) and
 ``song.runtime`` (which only reads them). Arrays are numpy; units are SI; world frame Z-up.
@@ -26,7 +26,7 @@ class RuntimeParams:
     from the opened benchmark, and any override is explicit and recorded with the results.
 
     Attributes:
-        robot: limits, control rate, collision settings, goal radius (DESIGN §8).
+        robot: limits, control rate, collision settings, goal radius.
         camera: the robot camera (height, FOV, near/far, resolution).
         pedestrian_radius_m: pedestrian body radius (the crowd's agent radius), m.
         fps: pedestrian trajectory rate, frames/s.
@@ -54,7 +54,7 @@ class StaticMap:
     Attributes:
         cells: (rows, cols) uint8; 255 free, 0 occupied, 127 unknown (unknown is not traversable).
         resolution: metres per cell.
-        origin: (x_min, y_min) of the lower-left corner, metres; mapping as DESIGN §4.1.
+        origin: (x_min, y_min) of the lower-left corner, metres; mapping as in song.geometry.grid
     """
 
     cells: np.ndarray

@@ -1,4 +1,4 @@
-"""The binding stage's index: ``binding/bindings.json`` (DESIGN §5.4; contents in docs/contracts.md)."""
+"""The binding stage's index: ``binding/bindings.json`` (contents in docs/contracts.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The intents stage's artifact: ``intents.json`` (DESIGN §5.1).
+"""The intents stage's artifact: ``intents.json``.
 
 CONTRACT: later stages, the release export and the pictures read it with :func:`read_intents`; the
 fields below are stable within ``schema_version``.

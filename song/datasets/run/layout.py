@@ -1,4 +1,4 @@
-"""The run folder's layout: every file name and path template of a run, in one place (DESIGN §5).
+"""The run folder's layout: every file name and path template of a run, in one place.
 
 A run folder (``song synth --out RUN``) holds::
 

@@ -1,4 +1,4 @@
-"""Scene packages (DESIGN §4): model, formats, importers, procedural generator."""
+"""Scene packages: model, formats, importers, procedural generator."""
 
 from song.datasets.scenes.model import Region, SceneObject, SemanticMap
 from song.datasets.scenes.occupancy import OccupancyGrid

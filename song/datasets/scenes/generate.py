@@ -1,4 +1,4 @@
-"""Procedural scene packages (DESIGN §4.4): venues with rooms, a corridor, doorways and named objects.
+"""Procedural scene packages: venues with rooms, a corridor, doorways and named objects.
 
 Layout: a building of venue-dependent size with a corridor along its middle (1.2–2.5 m wide), an
 entrance at its west end, and rooms on both sides, each opening onto the corridor through a doorway

@@ -1,4 +1,4 @@
-"""InteriorGS raw folders → scene packages (DESIGN §4.4).
+"""InteriorGS raw folders → scene packages.
 
 The dataset is gated, so this reads what its public descriptions document, and every frame
 assumption lives in :data:`FRAME` and :func:`interiorgs_to_world` (tested):

@@ -1,4 +1,4 @@
-"""Pydantic model of ``semantic_map.json`` (format "song.semantic_map", version 1; DESIGN §4.1).
+"""Pydantic model of ``semantic_map.json`` (format "song.semantic_map", version 1).
 
 Structural checks (types, finiteness, polygon shape) live here; checks that need the occupancy image
 or the other files live in :mod:`song.datasets.scenes.package`.
@@ -44,7 +44,7 @@ class _Model(BaseModel):
 
 
 class Frame(_Model):
-    """Metric frame of the package: metres, Z up (DESIGN §3)."""
+    """Metric frame of the package: metres, Z up."""
 
     units: Literal["m"] = "m"
     up: Literal["z"] = "z"

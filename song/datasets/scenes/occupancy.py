@@ -1,4 +1,4 @@
-"""Occupancy grid of a scene package: 8-bit PNG, 255 free, 0 occupied, 127 unknown (DESIGN §4)."""
+"""Occupancy grid of a scene package: 8-bit PNG, 255 free, 0 occupied, 127 unknown."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
-"""Scene packages: load, validate and write (DESIGN §4).
+"""Scene packages: load, validate and write.
 
 A package is a folder ``<scene_id>/`` with ``semantic_map.json`` and ``occupancy.png`` (required),
 ``3dgs_compressed.ply`` and ``scene_flat.usda`` (optional). :func:`load_scene_package` runs every
-check of DESIGN §4.1 and raises :class:`SceneError` with one line naming the file and the field.
+check and raises :class:`SceneError` with one line naming the file and the field.
 """
 
 from __future__ import annotations

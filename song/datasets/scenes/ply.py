@@ -1,4 +1,4 @@
-"""Gaussian PLY: standard 3DGS and PlayCanvas/SuperSplat compressed (DESIGN §4.2).
+"""Gaussian PLY: standard 3DGS and PlayCanvas/SuperSplat compressed.
 
 Standard 3DGS PLY: one ``vertex`` element with float properties x y z, nx ny nz, f_dc_0..2,
 f_rest_*, opacity (logit), scale_0..2 (log), rot_0..3 (w x y z).

@@ -1,4 +1,4 @@
-"""ProcTHOR house JSON → scene packages (DESIGN §4.4).
+"""ProcTHOR house JSON → scene packages.
 
 ProcTHOR (Unity) is Y-up and left-handed: x right, y up, z forward. :func:`unity_to_world` maps a
 Unity point (x, y, z) to ours (X, Y, Z) = (x, z, y): swapping y and z is a reflection, which turns the

@@ -1,4 +1,4 @@
-"""USD proxy ``scene_flat.usda`` (DESIGN §4.3): Z-up, metres.
+"""USD proxy ``scene_flat.usda``: Z-up, metres.
 
 ``/World/collision`` holds the obstacles as ``UsdGeom.Mesh`` prims -- walls, furniture parts, lintels --
 each a closed solid; ``/World/surfaces`` holds the floor and the ceiling (flat meshes). A

@@ -1,4 +1,4 @@
-"""Binding stage: avatar identities and linear-blend-skinning caches per pedestrian (DESIGN §5.4)."""
+"""Binding stage: avatar identities and linear-blend-skinning caches per pedestrian."""
 
 from song.pipeline.binding.stage import bind_motion, run_binding, sample_identities
 from song.pipeline.chain import Stage, register_stage

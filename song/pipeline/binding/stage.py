@@ -1,4 +1,4 @@
-"""The binding stage: motion → avatar identity + LBS cache per pedestrian (DESIGN §5.4, §7).
+"""The binding stage: motion → avatar identity + LBS cache per pedestrian.
 
 Per scene: every pedestrian with a motion (``human_amass/traj_{id}/motion.npz``) gets an identity from
 the pool, drawn with the scene's seeded generator (a fresh permutation of the pool each time it runs

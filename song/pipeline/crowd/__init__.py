@@ -1,4 +1,4 @@
-"""Crowd stage (DESIGN §5.2): navmesh + ORCA crowd simulation with DetourCrowd's structure at 30 FPS."""
+"""Crowd stage: navmesh + ORCA crowd simulation with DetourCrowd's structure at 30 FPS."""
 
 from song.pipeline.chain import Stage, register_stage
 from song.pipeline.crowd.navmesh import load_navmesh

@@ -43,7 +43,7 @@ def overlap_push(
 
     A walker moves half the overlap with another walker and all of it with someone standing; a
     standing pedestrian is not pushed, so two people standing too close (one who gave up, stepped
-    aside) do not count: until the nineteenth session they made every frame run all its passes.
+    aside) do not count (they would keep every frame running all its passes while pushing nobody).
     """
     n = len(target)
     push = np.zeros((n, 2))
@@ -171,9 +171,9 @@ def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dis
 
     In order: the acceleration limit (:func:`accelerate`); moves kept on the mesh and within the speed
     limit (:func:`_move`); up to ``passes`` overlap resolution passes (:func:`overlap_push` within each
-    walker's speed budget, again through :func:`_move`). Each move is final when the passes see it (until
-    the seventeenth session a step that sliding lengthened was shortened, or cancelled, after the passes,
-    which could leave a follower pressed 1 cm into a walker stopped that way). Non-walkers stay put.
+    walker's speed budget, again through :func:`_move`). Each move is final when the passes see it (a
+    step shortened or cancelled after them could leave a follower pressed 1 cm into a walker stopped
+    that way). Non-walkers stay put.
     ``mesh`` is the navmesh kernel tuple ``(va, vb, verts, tris, seg_tri, hgrid, hstart, hitems, tgrid,
     tstart, titems)``. One compiled call per frame: as numpy and navmesh calls these were ~20 dispatches
     a frame. The reference twin is :func:`song.pipeline.crowd._simulate_reference.settle_moves_reference`.

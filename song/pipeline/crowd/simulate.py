@@ -1,4 +1,4 @@
-"""Joint crowd simulation at 30 FPS on the navmesh, with DetourCrowd's structure (DESIGN §5.2).
+"""Joint crowd simulation at 30 FPS on the navmesh, with DetourCrowd's structure.
 
 Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
 
@@ -25,13 +25,12 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    26 before.)
 
 Nobody is removed once the simulation runs, so it runs once, from the earliest departure to the end
-(until the fourteenth session a walker stalled for good was removed and the crowd rolled back to
-before it first mattered, re-simulating much of the run; docs/crowd.md). Only pedestrians that cannot
+(a walker stalled for good gives up and stays in the scene; docs/crowd.md). Only pedestrians that cannot
 start (off the mesh, unreachable goals, overlapping starts) are left out, before the first frame.
 
 Pedestrians exist for the whole scenario: they stand at their start until departure, walk their
 routine's legs with a dwell at every intermediate stop, and stand at the last goal after arriving;
-others avoid them while they stand (DESIGN §5.2; the contract of ``crowd.parquet``). One due to walk
+others avoid them while they stand (the contract of ``crowd.parquet``). One due to walk
 off lets a walker coming by go first (:func:`_wait_for_passers`).
 """
 

@@ -1,4 +1,4 @@
-"""Grading (DESIGN §6): robot episodes in four modes, A* factors, difficulty split, manifest."""
+"""Grading: robot episodes in four modes, A* factors, difficulty split, manifest."""
 
 from song.pipeline.grading.grade import GradingResult, count_turns, grade_run, split_difficulty, tercile_bins
 

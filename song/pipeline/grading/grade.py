@@ -1,4 +1,4 @@
-"""Factors, difficulty split and the manifest (DESIGN §6; paper "Episode generation and grading")."""
+"""Factors, difficulty split and the manifest (paper "Episode generation and grading")."""
 
 from __future__ import annotations
 

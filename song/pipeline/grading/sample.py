@@ -1,4 +1,4 @@
-"""Robot episode sampling in one scene: four modes, A* on the robot-inflated grid (DESIGN §6)."""
+"""Robot episode sampling in one scene: four modes, A* on the robot-inflated grid."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Intents stage (DESIGN §5.1): semantic pedestrian routines for a scene."""
+"""Intents stage: semantic pedestrian routines for a scene."""
 
 from song.pipeline.chain import Stage, register_stage
 from song.pipeline.intents.stage import generate_intents, run_intents

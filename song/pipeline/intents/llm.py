@@ -1,4 +1,4 @@
-"""LLM clients for intents: Gemini (google-genai SDK) and any OpenAI-compatible server (DESIGN §5.1).
+"""LLM clients for intents: Gemini (google-genai SDK) and any OpenAI-compatible server.
 
 Both speak one protocol, :class:`LLMClient` (``provider``, ``model``, ``request(prompt, schema)``
 returning the raw reply text). :func:`structured_call` adds what every provider needs: a disk cache
@@ -95,8 +95,8 @@ class GeminiClient:
 
     The JSON schema goes in ``response_json_schema`` (sent as ``responseJsonSchema``, full JSON Schema):
     passing the pydantic model as ``response_schema`` makes the SDK send ``additional_properties``
-    inside the OpenAPI-subset ``responseSchema``, which the Gemini API rejects with 400 (python-genai
-    issue 1815). The key comes from ``GOOGLE_API_KEY`` / ``GEMINI_API_KEY`` with the SDK's own
+    inside the OpenAPI-subset ``responseSchema``, which the Gemini API rejects with 400 (a known
+    python-genai behaviour, googleapis/python-genai#1815). The key comes from ``GOOGLE_API_KEY`` / ``GEMINI_API_KEY`` with the SDK's own
     precedence (SONG never handles the value). ``base_url`` points the SDK elsewhere (tests).
     """
 

@@ -1,4 +1,4 @@
-"""``OfflineIntentModel``: deterministic, venue-aware intents over a scene's real objects (DESIGN §5.1).
+"""``OfflineIntentModel``: deterministic, venue-aware intents over a scene's real objects.
 
 It proposes start→goal object pairs the way prompt B asks an LLM to: routines that make sense for the
 venue, preferring long, cross-region and functionally related pairs, each with an activity phrase

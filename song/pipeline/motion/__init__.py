@@ -1,4 +1,4 @@
-"""Motion stage (DESIGN §5.3): planned root tracks → full-body motion on the 24-joint skeleton.
+"""Motion stage: planned root tracks → full-body motion on the 24-joint skeleton.
 
 Then trajectory-consistency post-processing and AMASS export (``human_amass/traj_{id}/``).
 """

@@ -1,6 +1,6 @@
 """Procedural gait: a footstep-planned, IK-driven walk that follows a planned root track exactly.
 
-How it works (DESIGN §5.3; issue #5):
+How it works:
 
 1. **Cadence and phase.** The step frequency follows the walk-ratio model ``f = √(v/WR)`` steps/s
    (step length ``L = √(v·WR)``, so ``f·L = v``), floored at ``min_cadence_spm``. A gait phase ``s``

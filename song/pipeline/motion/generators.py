@@ -1,4 +1,4 @@
-"""Motion generators (DESIGN §5.3).
+"""Motion generators.
 
 The :class:`MotionGenerator` interface, the always-available :class:`ProceduralGait`, and the choice
 between it and Kimodo.

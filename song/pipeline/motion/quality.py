@@ -1,4 +1,4 @@
-"""Motion quality figures (issue #5 targets), per pedestrian, written into ``meta.json``.
+"""Motion quality figures (the gait's normative targets), per pedestrian, written into ``meta.json``.
 
 Definitions:
 
@@ -160,7 +160,7 @@ def motion_quality(
     }
 
 
-# Normative ranges the procedural gait is held to (issue 18), healthy adults walking at 1.0-1.4 m/s:
+# Normative ranges the procedural gait is held to, healthy adults walking at 1.0-1.4 m/s:
 # knee flexion ~0-5° at heel strike, a 10-25° loading-response wave, 55-68° peak in swing, hip sagittal
 # range 35-50° (Perry & Burnfield, Gait Analysis, 2nd ed. 2010, ch. 7-8; Winter, Biomechanics and Motor
 # Control of Human Gait, 1991); walk ratio 0.34-0.44 m·s across 0.5-1.6 m/s (Sekiya & Nagasaki 1998,

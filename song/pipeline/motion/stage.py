@@ -1,4 +1,4 @@
-"""The motion stage: ``crowd.parquet`` → ``human_amass/traj_{id}/`` per pedestrian (DESIGN §5.3)."""
+"""The motion stage: ``crowd.parquet`` → ``human_amass/traj_{id}/`` per pedestrian."""
 
 from __future__ import annotations
 

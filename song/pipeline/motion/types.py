@@ -1,4 +1,4 @@
-"""Motion-stage data types: a planned root trajectory in, a skeletal motion out (DESIGN §5.3)."""
+"""Motion-stage data types: a planned root trajectory in, a skeletal motion out."""
 
 from __future__ import annotations
 
