@@ -266,6 +266,34 @@ def test_next_export_removes_a_killed_exports_temporary_folder(graded_run, tmp_p
     assert [p.name for p in (tmp_path / "bench").iterdir()] == ["1.0.0"]
 
 
+def test_collect_small_round_trip(graded_run, tmp_path: Path) -> None:
+    """One episode, state only: the dataset's actions, replayed, give its recorded states and outcome."""
+    from typer.testing import CliRunner
+
+    from song.cli import app
+    from song.runtime.avatars import make_collider
+    from song.runtime.loop import EpisodeRunner
+
+    release = export_bench(_scene_1_for_training(graded_run()), tmp_path / "bench", "1.0.0").path
+    out = tmp_path / "dataset"
+    args = ["collect", "--bench", str(release), "--out", str(out), "--limit", "1", "--keep", "all", "-j", "1"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    info = json.loads((out / "meta" / "info.json").read_text())
+    (e,) = [json.loads(line) for line in (out / "meta" / "episodes.jsonl").read_text().splitlines()]
+    data = pq.read_table(out / info["data_path"].format(episode_chunk=0, episode_index=0))
+    assert data.num_rows == e["length"] == info["total_frames"]
+    episode = bench.open(release).episode(e["song_episode_id"])
+    runner = EpisodeRunner(episode, make_collider(episode))
+    for state, action in zip(
+        data.column("observation.state").to_pylist(), data.column("action").to_pylist(), strict=True
+    ):
+        np.testing.assert_allclose([runner.pose.x, runner.pose.y], state[:2], atol=1e-5)
+        runner.step(*action)
+    assert runner.outcome == e["outcome"]
+
+
+@pytest.mark.slow
 def test_collect_writes_a_lerobot_dataset_from_the_training_split(graded_run, tmp_path: Path) -> None:
     """Round trip: the dataset's actions, replayed, give its recorded states and outcomes; frames match
     steps; the same options give the same bytes with one or two workers; --keep success filters."""
