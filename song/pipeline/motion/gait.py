@@ -601,90 +601,121 @@ def _loading_dip(phase_foot: np.ndarray) -> np.ndarray:
     return LOADING_DIP_M * np.where(u < peak, rise, fall) * ((u >= a) & (u <= b))
 
 
-def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 85.0) -> Motion:
-    """Procedural full-body walk that follows ``traj`` (see the module docstring).
+@dataclass
+class _Walk:
+    """What every part of one pedestrian's gait reads: the plan, the phase and the pose built so far."""
 
-    Args:
-        traj: the planned root track (30 FPS, world frame).
-        style: per-pedestrian style (height, walk ratio, ...).
-        min_cadence_spm: cadence floor, steps/min.
+    traj: Trajectory
+    style: GaitStyle
+    body: _Body
+    plan: _Plan
+    phase: np.ndarray
+    glob: np.ndarray  # (T, 24, 3, 3) global joint rotations, filled part by part
+    on_surface: np.ndarray  # (T,) how far the hands rest on a surface, 0..1
+    surface_lean: np.ndarray  # (T,) the lean that takes them there, rad
 
-    Returns:
-        A :class:`Motion` at the trajectory's time stamps, with stance flags as ``contacts``.
-    """
-    body = _Body(style.height_m)
-    rest = body.rest
-    plan = _plan_signals(traj)
-    n = traj.n_frames
-    h_scale = style.height_m / 1.75
-    phase, stance = _integrate_phase(plan, style, body.half_width * style.step_width, min_cadence_spm)
-    walk, heading, speed, t = plan.walk, plan.heading, plan.speed, traj.t
+    @property
+    def n(self) -> int:
+        return self.traj.n_frames
 
+    @property
+    def walk(self) -> np.ndarray:
+        return self.plan.walk
+
+    @property
+    def idle(self) -> np.ndarray:
+        return 1.0 - self.plan.walk
+
+    @property
+    def lean(self) -> float:
+        return float(np.radians(self.style.lean_deg))
+
+    @property
+    def breathing(self) -> np.ndarray:
+        return np.sin(2 * np.pi * 0.25 * self.traj.t + self.style.idle_phase)
+
+
+def _feet(w: _Walk, stance) -> tuple[list, list, list, list]:
+    """Per foot: ankle positions, foot rotations, planted flags and knee poles."""
     ankles, foot_rots, contacts, poles = [], [], [], []
     for foot, side in ((0, 1.0), (1, -1.0)):
         lo, placements = _stance_arrays(stance[foot])
-        ankle, yaw, pitch, planted = _foot_poses(body, phase - foot, walk, lo, placements, side)
+        ankle, yaw, pitch, planted = _foot_poses(w.body, w.phase - foot, w.walk, lo, placements, side)
         ankles.append(ankle)
         foot_rots.append(rot_z(yaw) @ rot_y(pitch))
         contacts.append(planted)
-        poles.append(np.stack([np.cos(yaw), np.sin(yaw), np.zeros(n)], axis=-1))
+        poles.append(np.stack([np.cos(yaw), np.sin(yaw), np.zeros(w.n)], axis=-1))
+    return ankles, foot_rots, contacts, poles
 
-    # pelvis: sway, bob, rotation, list; lean into turns
-    left = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
-    idle = 1.0 - walk
+
+def _pelvis(w: _Walk, ankles: list) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray]:
+    """Pelvis: sway, bob, rotation, list; lean into turns; lowered so the legs reach the feet.
+
+    Returns ``(pelvis (T, 3), its rotation (T, 3, 3), the hips, its yaw oscillation, the turn roll)``.
+    """
+    plan, phase, walk, idle, style, t = w.plan, w.phase, w.walk, w.idle, w.style, w.traj.t
+    rest = w.body.rest
+    h_scale = style.height_m / 1.75
+    left = np.stack([-np.sin(plan.heading), np.cos(plan.heading)], axis=-1)
     sway = walk * style.sway_m * np.cos(np.pi * (phase - 1.4)) + idle * 0.008 * np.sin(
         2 * np.pi * 0.1 * t + style.idle_phase
     )
     yaw_osc = -walk * np.radians(4.0) * np.cos(np.pi * (phase - 0.8))
     pelvic_list = walk * np.radians(3.0) * np.cos(np.pi * (phase - 1.4))
-    turn_roll = -np.clip(0.8 * np.arctan(speed * plan.yaw_rate / _GRAVITY), -0.17, 0.17)
-    lean = np.radians(style.lean_deg)
-    pelvis_heading = _ahead(heading, t, PELVIS_LEAD_S)
-    on_surface, surface_lean = body.hands_on_surface(traj, idle, 0.5 * lean)
-    tilt = 0.3 * lean * walk + HANDS_HIP_SHARE * on_surface * surface_lean
+    turn_roll = -np.clip(0.8 * np.arctan(plan.speed * plan.yaw_rate / _GRAVITY), -0.17, 0.17)
+    pelvis_heading = _ahead(plan.heading, t, PELVIS_LEAD_S)
+    on_surface, surface_lean = w.on_surface, w.surface_lean
+    tilt = 0.3 * w.lean * walk + HANDS_HIP_SHARE * on_surface * surface_lean
     rot_pelvis = rot_z(pelvis_heading + yaw_osc) @ rot_x(pelvic_list + 0.3 * turn_roll) @ rot_y(tilt)
-    pelvis = np.empty((n, 3))
-    pelvis[:, :2] = traj.xy + sway[:, None] * left
-    breathing = np.sin(2 * np.pi * 0.25 * t + style.idle_phase)
-    z_nominal = rest[0, 2] - walk * 0.0 * h_scale + walk * style.bob_m * np.cos(2 * np.pi * (phase - 1.4))
-    z_nominal = z_nominal + idle * 0.002 * breathing
+    pelvis = np.empty((w.n, 3))
+    pelvis[:, :2] = w.traj.xy + sway[:, None] * left
+    z_nominal = rest[0, 2] + walk * style.bob_m * np.cos(2 * np.pi * (phase - 1.4))
+    z_nominal = z_nominal + idle * 0.002 * w.breathing
     hip_offsets = [rot_pelvis @ (rest[J[name]] - rest[0]) for name in ("left_hip", "right_hip")]
     pelvis[:, 2] = z_nominal
     hips = [pelvis + off for off in hip_offsets]
-    pelvis[:, 2] = _lowered_pelvis(z_nominal, hips, ankles, z_nominal, body.leg * LEG_REACH)
+    pelvis[:, 2] = _lowered_pelvis(z_nominal, hips, ankles, z_nominal, w.body.leg * LEG_REACH)
     pelvis[:, 2] -= walk * h_scale * (_loading_dip(phase) + _loading_dip(phase - 1.0))
     hips = [pelvis + off for off in hip_offsets]
+    w.glob[:, 0] = rot_pelvis
+    return pelvis, rot_pelvis, hips, yaw_osc, turn_roll
 
-    glob = np.broadcast_to(np.eye(3), (n, 24, 3, 3)).copy()
-    glob[:, 0] = rot_pelvis
+
+def _legs(w: _Walk, rot_pelvis: np.ndarray, hips: list, ankles: list, foot_rots: list, poles: list) -> None:
+    """Thighs and shins by two-bone IK from the hips to the ankles (never stretched past the rest pose)."""
+    rest = w.body.rest
     pelvis_fwd = rot_pelvis[:, :, 0]
+    names = (
+        ("left_hip", "left_knee", "left_ankle", "left_foot"),
+        ("right_hip", "right_knee", "right_ankle", "right_foot"),
+    )
     for (hip_name, knee_name, ankle_name, foot_name), hip, ankle, rot_foot, pole in zip(
-        (
-            ("left_hip", "left_knee", "left_ankle", "left_foot"),
-            ("right_hip", "right_knee", "right_ankle", "right_foot"),
-        ),
-        hips,
-        ankles,
-        foot_rots,
-        poles,
-        strict=True,
+        names, hips, ankles, foot_rots, poles, strict=True
     ):
         knee_rest = hip + rest[J[knee_name]] - rest[J[hip_name]]
         ankle_rest = hip + rest[J[ankle_name]] - rest[J[hip_name]]
         bend_pole = pole + pelvis_fwd
-        reach = hip + _within(ankle - hip, body.leg * LEG_REACH)  # never stretched past the rest pose
-        ankle = np.where((np.linalg.norm(ankle - hip, axis=1) > body.leg * LEG_REACH)[:, None], reach, ankle)
+        reach = hip + _within(ankle - hip, w.body.leg * LEG_REACH)
+        ankle = np.where((np.linalg.norm(ankle - hip, axis=1) > w.body.leg * LEG_REACH)[:, None], reach, ankle)
         _, _, thigh, shin = two_bone_ik(hip, knee_rest, ankle_rest, ankle, bend_pole, np.array([1.0, 0.0, 0.0]))
-        glob[:, J[hip_name]] = thigh
-        glob[:, J[knee_name]] = shin
-        glob[:, J[ankle_name]] = rot_foot
-        glob[:, J[foot_name]] = rot_foot
+        w.glob[:, J[hip_name]] = thigh
+        w.glob[:, J[knee_name]] = shin
+        w.glob[:, J[ankle_name]] = rot_foot
+        w.glob[:, J[foot_name]] = rot_foot
 
-    # trunk, head, arms
-    chest_pitch = lean * (0.5 + 0.5 * walk) + idle * np.radians(1.0) * breathing
+
+def _trunk_and_head(w: _Walk, rot_pelvis: np.ndarray, yaw_osc: np.ndarray, turn_roll: np.ndarray):
+    """Spine, chest, neck and head: lean, turns led by the gaze, looking at a shelf or down at a surface.
+
+    Returns ``(chest rotation, chest pitch, the shelf browse plan or None)``.
+    """
+    traj, idle, heading, t = w.traj, w.idle, w.plan.heading, w.traj.t
+    rest = w.body.rest
+    on_surface, surface_lean = w.on_surface, w.surface_lean
+    chest_pitch = w.lean * (0.5 + 0.5 * w.walk) + idle * np.radians(1.0) * w.breathing
     chest_pitch = chest_pitch + on_surface * surface_lean
     browse = None if traj.shelf is None else browse_plan(traj.shelf, traj.fps, traj.ped_id)
-    browsing, gaze_yaw, gaze_pitch = np.zeros(n), np.zeros(n), np.zeros(n)
+    browsing, gaze_yaw, gaze_pitch = np.zeros(w.n), np.zeros(w.n), np.zeros(w.n)
     if browse is not None:  # the head turns to the point looked at on the shelf, the chest a little
         front = held_rows(traj.shelf)[:, 0]
         browsing = browse.on * idle
@@ -692,33 +723,40 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         gaze_pitch = np.clip(np.arctan2(rest[J["head"], 2] - browse.look[:, 1], front), *np.radians(GAZE_PITCH_DEG))
     chest_yaw = _ahead(heading, t, TRUNK_LEAD_S) - 0.5 * yaw_osc + CHEST_GAZE_SHARE * browsing * gaze_yaw
     rot_chest = rot_z(chest_yaw) @ rot_x(turn_roll) @ rot_y(chest_pitch)
-    for name, w in SPINE_PITCH_SHARE:
-        glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, w)
-    glob[:, J["spine3"]] = rot_chest
-    wander = idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + style.idle_phase)  # looking around
+    for name, share in SPINE_PITCH_SHARE:
+        w.glob[:, J[name]] = _slerp_matrix(rot_pelvis, rot_chest, share)
+    w.glob[:, J["spine3"]] = rot_chest
+    wander = idle * 0.25 * np.sin(2 * np.pi * 0.07 * t + w.style.idle_phase)  # looking around
     look = _ahead(heading, t, HEAD_LEAD_S) + (1.0 - browsing) * wander + browsing * gaze_yaw
-    head_pitch = np.radians(style.head_pitch_deg) + on_surface * 0.5 * surface_lean
+    head_pitch = np.radians(w.style.head_pitch_deg) + on_surface * 0.5 * surface_lean
     if traj.surface is not None:  # at a surface, within reach or not, the head looks down at it
         at = np.isfinite(traj.surface[:, 0]).astype(np.float64)
         at = gaussian_filter1d(at, HANDS_RAMP_S / 4.0 * traj.fps, mode="nearest")
         head_pitch = head_pitch + at * idle * np.radians(HANDS_HEAD_DEG)
     head_pitch = head_pitch + browsing * gaze_pitch
     rot_head = rot_z(look) @ rot_x(0.3 * turn_roll) @ rot_y(head_pitch)
-    glob[:, J["head"]] = rot_head
-    glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)
-    glob[:, J["left_collar"]] = rot_chest
-    glob[:, J["right_collar"]] = rot_chest
-    amplitude = np.radians(style.arm_swing * (ARM_SWING_DEG[0] + ARM_SWING_DEG[1] * np.clip(speed, 0.0, 1.5)))
-    swing_left = walk * amplitude * np.cos(np.pi * (phase - 1.8))
+    w.glob[:, J["head"]] = rot_head
+    w.glob[:, J["neck"]] = _slerp_matrix(rot_chest, rot_head, 0.5)
+    w.glob[:, J["left_collar"]] = rot_chest
+    w.glob[:, J["right_collar"]] = rot_chest
+    return rot_chest, chest_pitch, browse
+
+
+def _arms(w: _Walk, pelvis: np.ndarray, rot_chest: np.ndarray, chest_pitch: np.ndarray, browse) -> None:
+    """Arm swing while walking; hands laid on a surface or reaching to a shelf while standing."""
+    traj, style, heading, idle, n = w.traj, w.style, w.plan.heading, w.idle, w.n
+    on_surface = w.on_surface
+    amplitude = np.radians(style.arm_swing * (ARM_SWING_DEG[0] + ARM_SWING_DEG[1] * np.clip(w.plan.speed, 0.0, 1.5)))
+    swing_left = w.walk * amplitude * np.cos(np.pi * (w.phase - 1.8))
     for prefix, sign, swing in (("left", -1.0, swing_left), ("right", 1.0, -swing_left)):
         on_shoulder, flex, palm = np.zeros(n), np.full(n, np.radians(style.elbow_flex_deg)), np.zeros(n)
         # the ramps and their smoothing reach 2 × HANDS_RAMP_S beyond where the hands hold: nothing moves outside
         for f in _active(on_surface, int(2 * HANDS_RAMP_S * traj.fps)):
-            arm = _PlanarArm(traj.xy, body, glob, pelvis, heading, prefix, sign, chest_pitch, f)
+            arm = _PlanarArm(traj.xy, w.body, w.glob, pelvis, heading, prefix, sign, chest_pitch, f)
             on_shoulder[f], flex[f], palm[f] = _hands_on(arm, traj.surface[f], on_surface[f], flex[0], traj.fps)
         touch = np.zeros(n) if browse is None else browse.reach * idle * (browse.left == (prefix == "left"))
         for f in _active(touch, 0):
-            arm = _PlanarArm(traj.xy, body, glob, pelvis, heading, prefix, sign, chest_pitch, f)
+            arm = _PlanarArm(traj.xy, w.body, w.glob, pelvis, heading, prefix, sign, chest_pitch, f)
             on_shoulder[f], flex[f] = _touch_shelf(
                 arm, traj.shelf[f, 0], browse.look[f, 1], touch[f], flex[0], traj.fps
             )
@@ -732,19 +770,44 @@ def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 8
         if touch.any():  # touching an item on a shelf, the fingers point forward, the palm faces in
             grip = rot_z(heading + sign * np.radians(90.0)) @ rot_y(np.full(n, -np.pi / 2))
             hand = quat_to_matrix(quat_slerp(matrix_to_quat(hand), matrix_to_quat(grip), touch))
-        glob[:, J[f"{prefix}_shoulder"]] = shoulder
-        glob[:, J[f"{prefix}_elbow"]] = elbow
-        glob[:, J[f"{prefix}_wrist"]] = hand
-        glob[:, J[f"{prefix}_hand"]] = hand
+        w.glob[:, J[f"{prefix}_shoulder"]] = shoulder
+        w.glob[:, J[f"{prefix}_elbow"]] = elbow
+        w.glob[:, J[f"{prefix}_wrist"]] = hand
+        w.glob[:, J[f"{prefix}_hand"]] = hand
 
-    local_quats = matrix_to_quat(global_to_local(glob))
+
+def generate_gait(traj: Trajectory, style: GaitStyle, min_cadence_spm: float = 85.0) -> Motion:
+    """Procedural full-body walk that follows ``traj`` (see the module docstring).
+
+    Feet first (footholds from the phase), then the pelvis over them, the legs by IK, the trunk and
+    head, the arms.
+
+    Args:
+        traj: the planned root track (30 FPS, world frame).
+        style: per-pedestrian style (height, walk ratio, ...).
+        min_cadence_spm: cadence floor, steps/min.
+
+    Returns:
+        A :class:`Motion` at the trajectory's time stamps, with stance flags as ``contacts``.
+    """
+    body = _Body(style.height_m)
+    plan = _plan_signals(traj)
+    phase, stance = _integrate_phase(plan, style, body.half_width * style.step_width, min_cadence_spm)
+    glob = np.broadcast_to(np.eye(3), (traj.n_frames, 24, 3, 3)).copy()
+    on_surface, surface_lean = body.hands_on_surface(traj, 1.0 - plan.walk, 0.5 * np.radians(style.lean_deg))
+    w = _Walk(traj, style, body, plan, phase, glob, on_surface, surface_lean)
+    ankles, foot_rots, contacts, poles = _feet(w, stance)
+    pelvis, rot_pelvis, hips, yaw_osc, turn_roll = _pelvis(w, ankles)
+    _legs(w, rot_pelvis, hips, ankles, foot_rots, poles)
+    rot_chest, chest_pitch, browse = _trunk_and_head(w, rot_pelvis, yaw_osc, turn_roll)
+    _arms(w, pelvis, rot_chest, chest_pitch, browse)
     return Motion(
         ped_id=traj.ped_id,
         t=traj.t.copy(),
         frame=traj.frame.astype(np.int32),
         height_m=style.height_m,
-        rest_joints=rest,
-        local_quats=local_quats,
+        rest_joints=body.rest,
+        local_quats=matrix_to_quat(global_to_local(w.glob)),
         root_pos=pelvis,
         contacts=np.stack(contacts, axis=-1),
         info={"style": style.to_json()},
