@@ -290,8 +290,6 @@ def collect(
     Raises:
         SongError: an unknown sensor or ``keep``, an existing non-empty ``out``, or an unknown split.
     """
-    import pyarrow.parquet as pq
-
     from song.parallel import parallel_map
 
     chosen = parse_sensor_names(sensors)  # any registered sensor: its space says how it is stored
@@ -311,16 +309,24 @@ def collect(
         for e in episodes
     ]
     done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
-    features: dict[str, dict] | None = None
-    lines, stats_lines, total, successes, index, videos = [], [], 0, 0, 0, 0
-    for episode in episodes:
-        result = done[episode.episode_id]
-        successes += result["outcome"] == "success"
-        if result["steps"] == 0 or (keep == "success" and result["outcome"] != "success"):
-            continue
-        features = features or _features(result["plans"])
+    rollouts = [done[e.episode_id] for e in episodes]  # in release order, whatever the workers
+    kept = [r for r in rollouts if r["steps"] and (keep == "all" or r["outcome"] == "success")]
+    written = _write_episodes(out, kept, fps)
+    successes = sum(r["outcome"] == "success" for r in rollouts)
+    about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
+             "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes}  # fmt: skip
+    _write_meta(out, kept, written, fps, split, about)
+    return CollectSummary(out, len(kept), written["frames"], successes, len(rollouts))
+
+
+def _write_episodes(out: Path, kept: list[dict[str, Any]], fps: float) -> dict[str, Any]:
+    """Each kept rollout's Parquet table and videos; ``{"frames", "videos", "stats"}`` of what was written."""
+    import pyarrow.parquet as pq
+
+    frames, videos, stats = 0, 0, []
+    for index, result in enumerate(kept):
         chunk = index // CHUNK_SIZE
-        table = _table(result, index, total, fps)
+        table = _table(result, index, frames, fps)
         path = out / DATA_PATH.format(episode_chunk=chunk, episode_index=index)
         path.parent.mkdir(parents=True, exist_ok=True)
         pq.write_table(table, path, compression="zstd")
@@ -331,41 +337,40 @@ def collect(
             video.parent.mkdir(parents=True, exist_ok=True)
             write_mp4(video, result[plan.key], fps)
             videos += 1
-        lines.append(
-            {"episode_index": index, "tasks": [TASK], "length": result["steps"], "song_episode_id": episode.episode_id,
-             "outcome": result["outcome"], "difficulty": result["difficulty"]}
-        )  # fmt: skip
-        stats_lines.append({"episode_index": index, "stats": _stats(table)})
-        total += result["steps"]
-        index += 1
+        stats.append({"episode_index": index, "stats": _stats(table)})
+        frames += result["steps"]
+    return {"frames": frames, "videos": videos, "stats": stats}
+
+
+def _write_meta(
+    out: Path, kept: list[dict[str, Any]], written: dict[str, Any], fps: float, split: str, about: dict
+) -> None:
+    """LeRobot's ``meta/``: info.json (features from the first kept rollout), episodes, their stats, tasks."""
+    lines = [
+        {"episode_index": index, "tasks": [TASK], "length": r["steps"], "song_episode_id": r["episode_id"],
+         "outcome": r["outcome"], "difficulty": r["difficulty"]}
+        for index, r in enumerate(kept)
+    ]  # fmt: skip
     info = {
         "codebase_version": CODEBASE_VERSION,
         "robot_type": "song_differential_drive",
         "total_episodes": len(lines),
-        "total_frames": total,
+        "total_frames": written["frames"],
         "total_tasks": 1,
-        "total_videos": videos,
+        "total_videos": written["videos"],
         "total_chunks": max(1, (len(lines) - 1) // CHUNK_SIZE + 1),
         "chunks_size": CHUNK_SIZE,
         "fps": fps,
         "splits": {split: f"0:{len(lines)}"},
         "data_path": DATA_PATH,
-        "video_path": VIDEO_PATH if videos else None,
-        "features": features or {},
-        "song": {
-            "release": str(bench.version),
-            "fingerprint": bench.info.fingerprint,
-            "policy": policy_name,
-            "split": split,
-            "keep": keep,
-            "rollouts": len(episodes),
-            "successes": successes,
-        },
+        "video_path": VIDEO_PATH if written["videos"] else None,
+        "features": _features(kept[0]["plans"]) if kept else {},
+        "song": about,
     }
     meta = out / "meta"
     meta.mkdir(parents=True, exist_ok=True)
     write_json_atomic(meta / "info.json", info)
     write_text_atomic(meta / "episodes.jsonl", "".join(json.dumps(x, sort_keys=True) + "\n" for x in lines))
-    write_text_atomic(meta / "episodes_stats.jsonl", "".join(json.dumps(x, sort_keys=True) + "\n" for x in stats_lines))
+    stats = "".join(json.dumps(x, sort_keys=True) + "\n" for x in written["stats"])
+    write_text_atomic(meta / "episodes_stats.jsonl", stats)
     write_text_atomic(meta / "tasks.jsonl", json.dumps({"task_index": 0, "task": TASK}) + "\n")
-    return CollectSummary(out, len(lines), total, successes, len(episodes))
