@@ -273,6 +273,57 @@ def _changelog(version: str, parent: str | None, notes: str, counts: dict[str, A
     return "\n".join(lines) + "\n"
 
 
+def _counts(episodes: pa.Table, n_scenes: int, n_pedestrians: int) -> dict[str, Any]:
+    """The release's counts: episodes, scenes, pedestrians, and episodes per difficulty and per mode."""
+    difficulty = episodes.column("difficulty").to_pylist()
+    mode = episodes.column("mode").to_pylist()
+    return {
+        "episodes": episodes.num_rows,
+        "scenes": n_scenes,
+        "pedestrians": n_pedestrians,
+        "difficulty": {d: difficulty.count(d) for d in ("easy", "medium", "hard")},
+        "mode": {m: mode.count(m) for m in sorted(set(mode))},
+    }
+
+
+def _release_info(
+    version: str, parent: str | None, notes: str, run_info: RunInfo, counts: dict, tables: dict, rows_by_path: dict
+) -> Info:
+    """``meta/info.json`` before its fingerprint: every runtime parameter the run was made with."""
+    config = run_info.config
+    robot = config.robot
+    return Info(
+        dataset_version=version,
+        parent=parent,
+        notes=notes,
+        created=_created(),
+        generator=Generator(version=song.__version__, git_commit=_git_commit(), config_sha256=run_info.config_sha256),
+        fps=config.crowd.fps,
+        robot=robot.model_dump(mode="json"),
+        camera=config.camera.model_dump(mode="json"),
+        collision={
+            "radius_m": robot.radius_m,
+            "height_m": robot.collision_height_m,
+            "volume": robot.collision_volume,
+            "eta_col": robot.eta_col,
+        },
+        pedestrian_radius_m=config.crowd.agent_radius_m,
+        crowd={
+            "avoidance": config.crowd.avoidance,
+            "comfort_distance_m": config.crowd.comfort_distance_m,
+            "speed_profile": config.intents.speed_profile,
+            "scenario_s": config.intents.scenario_s,
+            "max_legs": config.intents.max_legs,
+        },
+        counts=counts,
+        tables={
+            name: TableInfo(path=rel, rows=rows_by_path[rel], columns=list(schema.names))
+            for name, (rel, _, schema) in tables.items()
+        },
+        fingerprint="",
+    )
+
+
 def export_bench(
     run_dir: str | Path,
     bench_dir: str | Path,
@@ -326,50 +377,11 @@ def export_bench(
         rows_by_path = {}
         for name, (rel, table, schema) in tables.items():
             rows_by_path[rel] = write_parquet(tmp / rel, table, schema, name, version)
-        difficulty = episodes.column("difficulty").to_pylist()
-        mode = episodes.column("mode").to_pylist()
-        counts = {
-            "episodes": episodes.num_rows,
-            "scenes": len(scene_ids),
-            "pedestrians": len(avatar_rows),
-            "difficulty": {d: difficulty.count(d) for d in ("easy", "medium", "hard")},
-            "mode": {m: mode.count(m) for m in sorted(set(mode))},
-        }
+        counts = _counts(episodes, len(scene_ids), len(avatar_rows))
         (tmp / CHANGELOG_PATH).write_text(_changelog(version, parent, notes, counts), encoding="utf-8")
         manifest = manifest_rows(tmp, rows_by_path)
         write_parquet(tmp / MANIFEST_PATH, pa.Table.from_pylist(manifest, MANIFEST), MANIFEST, "manifest", version)
-        info = Info(
-            dataset_version=version,
-            parent=parent,
-            notes=notes,
-            created=_created(),
-            generator=Generator(
-                version=song.__version__, git_commit=_git_commit(), config_sha256=run_info.config_sha256
-            ),
-            fps=config.crowd.fps,
-            robot=robot.model_dump(mode="json"),
-            camera=config.camera.model_dump(mode="json"),
-            collision={
-                "radius_m": robot.radius_m,
-                "height_m": robot.collision_height_m,
-                "volume": robot.collision_volume,
-                "eta_col": robot.eta_col,
-            },
-            pedestrian_radius_m=config.crowd.agent_radius_m,
-            crowd={
-                "avoidance": config.crowd.avoidance,
-                "comfort_distance_m": config.crowd.comfort_distance_m,
-                "speed_profile": config.intents.speed_profile,
-                "scenario_s": config.intents.scenario_s,
-                "max_legs": config.intents.max_legs,
-            },
-            counts=counts,
-            tables={
-                name: TableInfo(path=rel, rows=rows_by_path[rel], columns=list(schema.names))
-                for name, (rel, _, schema) in tables.items()
-            },
-            fingerprint="",
-        )
+        info = _release_info(version, parent, notes, run_info, counts, tables, rows_by_path)
         fingerprint = fingerprint_of(manifest, info.model_dump(mode="json"))
         info = info.model_copy(update={"fingerprint": fingerprint})
         write_json_atomic(tmp / INFO_PATH, info.model_dump(mode="json"))
