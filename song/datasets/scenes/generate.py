@@ -235,105 +235,107 @@ def _wall(raster: Rasterizer, a, b, thickness: float) -> None:
     raster.segment(np.array(a, float), np.array(b, float), thickness, 0)
 
 
+def _draw_walls(
+    raster: Rasterizer, width: float, height: float, corridor: tuple, rooms: list, entrance_w: float
+) -> None:
+    """The outer walls (an entrance gap on the west, on the corridor) and each room's wall with its door."""
+    cy0, cy1 = corridor
+    t = OUTER_WALL_M / 2
+    ey = (cy0 + cy1) / 2
+    _wall(raster, (t, t), (width - t, t), OUTER_WALL_M)
+    _wall(raster, (width - t, t), (width - t, height - t), OUTER_WALL_M)
+    _wall(raster, (width - t, height - t), (t, height - t), OUTER_WALL_M)
+    _wall(raster, (t, height - t), (t, ey + entrance_w / 2), OUTER_WALL_M)
+    _wall(raster, (t, ey - entrance_w / 2), (t, t), OUTER_WALL_M)
+    for room in rooms:
+        x0, _, x1, _ = room.rect
+        dx, wy, dw = room.door
+        _wall(raster, (x0 - INNER_WALL_M / 2 if x0 > OUTER_WALL_M else x0, wy), (dx - dw / 2, wy), INNER_WALL_M)
+        right = x1 + INNER_WALL_M / 2 if x1 < width - OUTER_WALL_M else x1
+        _wall(raster, (dx + dw / 2, wy), (right, wy), INNER_WALL_M)
+        if x1 < width - OUTER_WALL_M - 0.01:
+            far = room.rect[1] if wy == cy1 else room.rect[3]
+            _wall(raster, (x1 + INNER_WALL_M / 2, wy), (x1 + INNER_WALL_M / 2, far), INNER_WALL_M)
+
+
+def _openings(corridor: tuple, rooms: list, entrance_w: float) -> list[Opening]:
+    """The entrance and every room's door, as dressing openings."""
+    t, ey = OUTER_WALL_M / 2, (corridor[0] + corridor[1]) / 2
+    entrance = Opening((t, ey - entrance_w / 2), (t, ey + entrance_w / 2), ENTRANCE_HEIGHT_M, OUTER_WALL_M)
+    doors = [
+        Opening(
+            (r.door[0] - r.door[2] / 2, r.door[1]), (r.door[0] + r.door[2] / 2, r.door[1]), DOOR_HEIGHT_M, INNER_WALL_M
+        )
+        for r in rooms
+    ]
+    return [entrance, *doors]
+
+
+def _furnish(rooms: list, rng: np.random.Generator, raster: Rasterizer) -> tuple[list[Region], list[SceneObject]]:
+    """Each room's region and furniture (drawn into the raster), in room order."""
+    placed: list[np.ndarray] = []
+    regions, objects, counts = [], [], {}
+    for k, room in enumerate(rooms):
+        rid = f"{room.kind}_{k + 1}"
+        x0, y0, x1, y1 = room.rect
+        regions.append(Region(id=rid, type=room.kind, name=room.name, polygon=[(x0, y0), (x1, y0), (x1, y1), (x0, y1)]))
+        for item, corners, h in _place_items(room, rng, placed):
+            counts[item] = counts.get(item, 0) + 1
+            label, category = FURNITURE[item][:2]
+            footprint = [tuple(c) for c in corners.tolist()]
+            objects.append(
+                SceneObject(id=f"{item}_{counts[item]}", label=label, category=category, footprint=footprint,
+                            z_max=h, region=rid)
+            )  # fmt: skip
+            raster.polygon(corners, 0)
+    return regions, objects
+
+
+def _entrance(corridor: tuple, entrance_w: float) -> SceneObject:
+    """The entrance as an object of the corridor (people come in and go out there)."""
+    ey, ex = (corridor[0] + corridor[1]) / 2, OUTER_WALL_M + 0.05
+    footprint = [
+        (0.0, ey - entrance_w / 2),
+        (ex, ey - entrance_w / 2),
+        (ex, ey + entrance_w / 2),
+        (0.0, ey + entrance_w / 2),
+    ]
+    return SceneObject(
+        id="entrance_1", label="entrance", category="entrance", region="corridor", footprint=footprint, z_max=2.2
+    )
+
+
+def _attempt(venue: str, rng: np.random.Generator):
+    """One draw of a venue: ``(width, height, regions, objects, openings, cells, connected)``."""
+    width, height, corridor, rooms = _layout(venue, rng)
+    raster = Rasterizer((0.0, 0.0), (width, height), RESOLUTION, fill=255)
+    entrance_w = float(np.round(rng.uniform(1.2, min(2.2, corridor[1] - corridor[0])), 2))
+    _draw_walls(raster, width, height, corridor, rooms, entrance_w)
+    hall = Region(
+        id="corridor", type="corridor", name="corridor",
+        polygon=[(0.0, corridor[0]), (width, corridor[0]), (width, corridor[1]), (0.0, corridor[1])],
+    )  # fmt: skip
+    regions, objects = _furnish(rooms, rng, raster)
+    cells = raster.cells
+    _, n_parts = components(erode(cells == 255, RESOLUTION, BODY_RADIUS_M))
+    openings = _openings(corridor, rooms, entrance_w)
+    return width, height, [hall, *regions], [*objects, _entrance(corridor, entrance_w)], openings, cells, n_parts == 1
+
+
 def generate_scene(
     scene_id: str, venue: str, seed: int, out_dir: str | Path, splat: bool = True, spacing: float = SPACING_M
 ) -> Path:
     """One procedural package ``out_dir/scene_id`` for ``venue``; deterministic in (seed, scene_id).
 
-    The USD proxy is always written (it carries the doorways as dressing hints); the Gaussian scene
-    too unless ``splat`` is False (``song scenes splat`` can add it later, identically).
+    Up to eight draws, until one whose walkable space is one connected part. The USD proxy is always
+    written (it carries the doorways as dressing hints); the Gaussian scene too unless ``splat`` is
+    False (``song scenes splat`` can add it later, identically).
     """
     for attempt in range(8):
-        rng = derive_rng(seed, scene_id, "generate", attempt)
-        width, height, (cy0, cy1), rooms = _layout(venue, rng)
-        raster = Rasterizer((0.0, 0.0), (width, height), RESOLUTION, fill=255)
-
-        def wall(a, b, thickness, name, raster=raster):
-            _wall(raster, a, b, thickness)
-
-        t = OUTER_WALL_M / 2
-        wall((t, t), (width - t, t), OUTER_WALL_M, "outer_south")
-        wall((width - t, t), (width - t, height - t), OUTER_WALL_M, "outer_east")
-        wall((width - t, height - t), (t, height - t), OUTER_WALL_M, "outer_north")
-        entrance_w = float(np.round(rng.uniform(1.2, min(2.2, cy1 - cy0)), 2))
-        ey = (cy0 + cy1) / 2
-        wall((t, height - t), (t, ey + entrance_w / 2), OUTER_WALL_M, "outer_west_north")
-        wall((t, ey - entrance_w / 2), (t, t), OUTER_WALL_M, "outer_west_south")
-        for k, room in enumerate(rooms):
-            x0, _, x1, _ = room.rect
-            dx, wy, dw = room.door
-            wall(
-                (x0 - INNER_WALL_M / 2 if x0 > OUTER_WALL_M else x0, wy), (dx - dw / 2, wy), INNER_WALL_M, f"wall_{k}_a"
-            )
-            wall(
-                (dx + dw / 2, wy),
-                (x1 + INNER_WALL_M / 2 if x1 < width - OUTER_WALL_M else x1, wy),
-                INNER_WALL_M,
-                f"wall_{k}_b",
-            )
-            if x1 < width - OUTER_WALL_M - 0.01:
-                far = room.rect[1] if wy == cy1 else room.rect[3]
-                wall((x1 + INNER_WALL_M / 2, wy), (x1 + INNER_WALL_M / 2, far), INNER_WALL_M, f"wall_{k}_side")
-        placed: list[np.ndarray] = []
-        objects, counts = [], {}
-        regions = [
-            Region(
-                id="corridor",
-                type="corridor",
-                name="corridor",
-                polygon=[(0.0, cy0), (width, cy0), (width, cy1), (0.0, cy1)],
-            )
-        ]
-        openings = [Opening((t, ey - entrance_w / 2), (t, ey + entrance_w / 2), ENTRANCE_HEIGHT_M, OUTER_WALL_M)] + [
-            Opening(
-                (r.door[0] - r.door[2] / 2, r.door[1]),
-                (r.door[0] + r.door[2] / 2, r.door[1]),
-                DOOR_HEIGHT_M,
-                INNER_WALL_M,
-            )
-            for r in rooms
-        ]
-        for k, room in enumerate(rooms):
-            rid = f"{room.kind}_{k + 1}"
-            x0, y0, x1, y1 = room.rect
-            regions.append(
-                Region(id=rid, type=room.kind, name=room.name, polygon=[(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
-            )
-            for item, corners, h in _place_items(room, rng, placed):
-                counts[item] = counts.get(item, 0) + 1
-                oid = f"{item}_{counts[item]}"
-                label, category = FURNITURE[item][:2]
-                objects.append(
-                    SceneObject(
-                        id=oid,
-                        label=label,
-                        category=category,
-                        footprint=[tuple(c) for c in corners.tolist()],
-                        z_max=h,
-                        region=rid,
-                    )
-                )
-                raster.polygon(corners, 0)
-        ex = OUTER_WALL_M + 0.05
-        objects.append(
-            SceneObject(
-                id="entrance_1",
-                label="entrance",
-                category="entrance",
-                region="corridor",
-                footprint=[
-                    (0.0, ey - entrance_w / 2),
-                    (ex, ey - entrance_w / 2),
-                    (ex, ey + entrance_w / 2),
-                    (0.0, ey + entrance_w / 2),
-                ],
-                z_max=2.2,
-            )
+        width, height, regions, objects, openings, cells, connected = _attempt(
+            venue, derive_rng(seed, scene_id, "generate", attempt)
         )
-        cells = raster.cells
-        free = cells == 255
-        _, n_parts = components(erode(free, RESOLUTION, BODY_RADIUS_M))
-        if n_parts == 1:
+        if connected:
             break
     smap = SemanticMap(
         scene_id=scene_id,
