@@ -195,22 +195,32 @@ def _head_centre(p: AvatarParams, rest: np.ndarray) -> tuple[np.ndarray, np.ndar
     return centre, radii
 
 
+def _tube(rest: np.ndarray, s: float, g: float, name, a, b, r0, r1, region, flat=1.0, density=1.0) -> _Part:
+    """A tapered tube between two joints (or points), radii scaled by height and girth."""
+    return _Part(
+        name,
+        rest[J[a]] if isinstance(a, str) else np.asarray(a, float),
+        rest[J[b]] if isinstance(b, str) else np.asarray(b, float),
+        (r0 * s * g, r1 * s * g, flat),
+        region,
+        density,
+    )
+
+
+def _blob(name, centre, radii, region, density=1.0) -> _Part:
+    """An ellipsoid."""
+    return _Part(name, np.asarray(centre, float), None, tuple(float(r) for r in radii), region, density)
+
+
 def _body_parts(p: AvatarParams, rest: np.ndarray) -> list[_Part]:
+    """The body's parts in a fixed order: head, neck, torso; each side's limbs; clothing layers, hair, accessories."""
     h, g = p.height_m, p.girth
     s = h / 1.75
 
-    def tube(name, a, b, r0, r1, region, flat=1.0, density=1.0):
-        return _Part(
-            name,
-            rest[J[a]] if isinstance(a, str) else np.asarray(a, float),
-            rest[J[b]] if isinstance(b, str) else np.asarray(b, float),
-            (r0 * s * g, r1 * s * g, flat),
-            region,
-            density,
-        )
+    def tube(*args, **kwargs) -> _Part:
+        return _tube(rest, s, g, *args, **kwargs)
 
-    def blob(name, centre, radii, region, density=1.0):
-        return _Part(name, np.asarray(centre, float), None, tuple(float(r) for r in radii), region, density)
+    blob = _blob
 
     pelvis, neck = rest[J["pelvis"]], rest[J["neck"]]
     hc, hr = _head_centre(p, rest)
@@ -237,25 +247,48 @@ def _body_parts(p: AvatarParams, rest: np.ndarray) -> list[_Part]:
         tube("shoulders", "left_shoulder", "right_shoulder", 0.055, 0.055, "torso"),
     ]
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        shoulder, wrist, hand = rest[J[f"{side}_shoulder"]], rest[J[f"{side}_wrist"]], rest[J[f"{side}_hand"]]
-        parts += [
-            blob(f"{side}_ear", hc + np.array([-0.05 * hr[0], sign * 0.97 * hr[1], -0.05 * hr[2]]), np.array([0.02, 0.011, 0.03]) * s * p.head_scale, "ear", HEAD_DENSITY),
-            blob(f"{side}_shoulder_cap", shoulder + np.array([0, sign * 0.01 * s, 0]), np.array([0.058, 0.06, 0.06]) * s * g, f"{side}_shoulder_cap"),
-            tube(f"{side}_upper_arm", f"{side}_shoulder", f"{side}_elbow", 0.048, 0.04, f"{side}_upper_arm"),
-            tube(f"{side}_forearm", f"{side}_elbow", f"{side}_wrist", 0.039, 0.031, f"{side}_forearm"),
-            blob(f"{side}_palm", 0.45 * wrist + 0.55 * hand, np.array([0.042, 0.045, 0.017]) * s, "hand", HAND_DENSITY),
-            tube(f"{side}_fingers", hand, hand + np.array([0.0, sign * 0.085 * s, -0.004 * s]), 0.016 / g, 0.013 / g, "fingers", 2.5, HAND_DENSITY),
-            tube(f"{side}_thumb", wrist + np.array([0.025, sign * 0.035, -0.004]) * s, wrist + np.array([0.065, sign * 0.07, -0.01]) * s, 0.011 / g, 0.009 / g, "hand", 1.0, HAND_DENSITY),
-            blob(f"{side}_hip_cap", rest[J[f"{side}_hip"]] + np.array([0, sign * 0.015 * s, -0.01 * s]), np.array([0.085, 0.08, 0.08]) * s * g * (p.hip_m / 0.35), f"{side}_hip_cap"),
-            tube(f"{side}_thigh", f"{side}_hip", f"{side}_knee", 0.08 * p.hip_m / 0.35, 0.056, f"{side}_thigh"),
-            tube(f"{side}_shin", f"{side}_knee", f"{side}_ankle", 0.054, 0.038, f"{side}_shin"),
-            blob(
-                f"{side}_foot",
-                0.5 * (rest[J[f"{side}_ankle"]] + rest[J[f"{side}_foot"]]) + np.array([0.01, 0, -0.01]) * s,
-                np.array([0.12, 0.048, 0.04]) * s,
-                "foot",
-            ),
-        ]  # fmt: skip
+        parts += _side_parts(p, rest, side, sign, hc, hr)
+    return parts + _layer_parts(p, rest, hc, hr, waist_half)  # fmt: skip
+
+
+def _side_parts(
+    p: AvatarParams, rest: np.ndarray, side: str, sign: float, hc: np.ndarray, hr: np.ndarray
+) -> list[_Part]:
+    """One side's ear, arm, hand, hip, leg and foot."""
+    g, s = p.girth, p.height_m / 1.75
+
+    def tube(*args, **kwargs) -> _Part:
+        return _tube(rest, s, g, *args, **kwargs)
+
+    blob = _blob
+    shoulder, wrist, hand = rest[J[f"{side}_shoulder"]], rest[J[f"{side}_wrist"]], rest[J[f"{side}_hand"]]
+    return [
+        blob(f"{side}_ear", hc + np.array([-0.05 * hr[0], sign * 0.97 * hr[1], -0.05 * hr[2]]), np.array([0.02, 0.011, 0.03]) * s * p.head_scale, "ear", HEAD_DENSITY),
+        blob(f"{side}_shoulder_cap", shoulder + np.array([0, sign * 0.01 * s, 0]), np.array([0.058, 0.06, 0.06]) * s * g, f"{side}_shoulder_cap"),
+        tube(f"{side}_upper_arm", f"{side}_shoulder", f"{side}_elbow", 0.048, 0.04, f"{side}_upper_arm"),
+        tube(f"{side}_forearm", f"{side}_elbow", f"{side}_wrist", 0.039, 0.031, f"{side}_forearm"),
+        blob(f"{side}_palm", 0.45 * wrist + 0.55 * hand, np.array([0.042, 0.045, 0.017]) * s, "hand", HAND_DENSITY),
+        tube(f"{side}_fingers", hand, hand + np.array([0.0, sign * 0.085 * s, -0.004 * s]), 0.016 / g, 0.013 / g, "fingers", 2.5, HAND_DENSITY),
+        tube(f"{side}_thumb", wrist + np.array([0.025, sign * 0.035, -0.004]) * s, wrist + np.array([0.065, sign * 0.07, -0.01]) * s, 0.011 / g, 0.009 / g, "hand", 1.0, HAND_DENSITY),
+        blob(f"{side}_hip_cap", rest[J[f"{side}_hip"]] + np.array([0, sign * 0.015 * s, -0.01 * s]), np.array([0.085, 0.08, 0.08]) * s * g * (p.hip_m / 0.35), f"{side}_hip_cap"),
+        tube(f"{side}_thigh", f"{side}_hip", f"{side}_knee", 0.08 * p.hip_m / 0.35, 0.056, f"{side}_thigh"),
+        tube(f"{side}_shin", f"{side}_knee", f"{side}_ankle", 0.054, 0.038, f"{side}_shin"),
+        blob(
+            f"{side}_foot",
+            0.5 * (rest[J[f"{side}_ankle"]] + rest[J[f"{side}_foot"]]) + np.array([0.01, 0, -0.01]) * s,
+            np.array([0.12, 0.048, 0.04]) * s,
+            "foot",
+        ),
+    ]  # fmt: skip
+
+
+def _layer_parts(p: AvatarParams, rest: np.ndarray, hc: np.ndarray, hr: np.ndarray, waist_half: float) -> list[_Part]:
+    """Skirt, hair and accessories over the body."""
+    h, g = p.height_m, p.girth
+    s = h / 1.75
+    pelvis = rest[J["pelvis"]]
+    blob = _blob
+    parts: list[_Part] = []
     if p.bottom == "skirt":
         waist = pelvis + np.array([0, 0, 0.03 * s])
         hem = np.array([waist[0], 0.0, (0.33 if p.dress else 0.4) * h])
@@ -403,6 +436,21 @@ def _folds(t: np.ndarray, near_start: bool, near_end: bool) -> np.ndarray:
     return 1.0 - 0.14 * weight * np.sin(2 * np.pi * t * 9) ** 2
 
 
+@dataclass(frozen=True)
+class _Cloth:
+    """The colours a part's points start from: skin (with its tone), the top and bottom garments, side seams."""
+
+    skin: np.ndarray
+    tone: np.ndarray
+    top: np.ndarray
+    bottom: np.ndarray
+    seam: np.ndarray
+
+    @property
+    def bare(self) -> np.ndarray:
+        return self.skin * self.tone[:, None]
+
+
 def _colours(
     p: AvatarParams, part: _Part, points: np.ndarray, normals: np.ndarray, t: np.ndarray, v: np.ndarray
 ) -> np.ndarray:
@@ -410,7 +458,6 @@ def _colours(
     n = len(points)
     skin, bottom = np.array(p.skin), np.array(p.bottom_colour)
     tone = 1.0 + 0.035 * np.sin(points[:, 0] * 23 + 1.3) * np.sin(points[:, 1] * 19) * np.sin(points[:, 2] * 17 + 0.7)
-    out = skin * tone[:, None]
     top_rgb = np.tile(np.array(p.top_colour), (n, 1))
     if p.pattern == "stripes":
         top_rgb[(np.floor(points[:, 2] / p.stripe_m) % 2).astype(bool)] = p.accent_colour
@@ -418,28 +465,46 @@ def _colours(
         top_rgb[points[:, 2] < 0.63 * p.height_m] = p.accent_colour
     top_rgb *= _fabric(p.top_fabric, points, v)[:, None]
     bottom_rgb = bottom * _fabric(p.bottom_fabric, points, v)[:, None]
-    region, h = part.region, p.height_m
     seam = np.abs(v[:, 1]) < 0.06  # the sides of a vertical tube (its width axis is lateral)
+    cloth = _Cloth(skin, tone, top_rgb, bottom_rgb, seam)
+    region = part.region
     if region == "torso":
-        out = top_rgb.copy()
-        out[seam] *= 0.84
-        if p.top == "tank":
-            bare = np.abs(points[:, 1]) > 0.3 * p.biacromial_m
-            out[bare & (points[:, 2] > 0.78 * h)] = skin
-        low = points[:, 2] < 0.5 * h
-        out[low] = bottom_rgb[low] if not p.dress else top_rgb[low]
-        belt = np.abs(points[:, 2] - 0.5 * h) < 0.012 * h
-        if not p.dress:
-            out[belt] *= 0.6
-        if "bag" in p.accessories:  # the strap across the chest
-            strap = np.abs(points[:, 2] - (0.72 * h - 0.9 * points[:, 1])) < 0.018
-            out[strap & (points[:, 0] > 0) & (points[:, 2] > 0.52 * h)] = np.array(p.accessory_colour) * 0.7
-        if "lanyard" in p.accessories:
-            band = (np.abs(np.abs(points[:, 1]) - (points[:, 2] - 0.66 * h) * 0.45) < 0.008) & (points[:, 2] > 0.66 * h)
-            out[band & (points[:, 0] > 0)] = p.accessory_colour
-            badge = (np.abs(points[:, 1]) < 0.03) & (np.abs(points[:, 2] - 0.645 * h) < 0.04) & (points[:, 0] > 0)
-            out[badge] = [0.95, 0.95, 0.93]
-    elif region.endswith("shoulder_cap"):
+        return _torso_colours(p, cloth, points)
+    if region.endswith(("shoulder_cap", "upper_arm", "forearm")):
+        return _arm_colours(p, cloth, region, t)
+    if region.endswith(("hip_cap", "thigh", "shin")) or region in ("foot", "skirt"):
+        return _leg_colours(p, cloth, region, points, t, v)
+    return _head_and_kit_colours(p, cloth, region, points, normals, t, v)
+
+
+def _torso_colours(p: AvatarParams, cloth: _Cloth, points: np.ndarray) -> np.ndarray:
+    """The top, the bottom below the waist (or a dress), a belt, a bag's strap, a lanyard and badge."""
+    skin, top_rgb, bottom_rgb, seam, h = cloth.skin, cloth.top, cloth.bottom, cloth.seam, p.height_m
+    out = top_rgb.copy()
+    out[seam] *= 0.84
+    if p.top == "tank":
+        bare = np.abs(points[:, 1]) > 0.3 * p.biacromial_m
+        out[bare & (points[:, 2] > 0.78 * h)] = skin
+    low = points[:, 2] < 0.5 * h
+    out[low] = bottom_rgb[low] if not p.dress else top_rgb[low]
+    belt = np.abs(points[:, 2] - 0.5 * h) < 0.012 * h
+    if not p.dress:
+        out[belt] *= 0.6
+    if "bag" in p.accessories:  # the strap across the chest
+        strap = np.abs(points[:, 2] - (0.72 * h - 0.9 * points[:, 1])) < 0.018
+        out[strap & (points[:, 0] > 0) & (points[:, 2] > 0.52 * h)] = np.array(p.accessory_colour) * 0.7
+    if "lanyard" in p.accessories:
+        band = (np.abs(np.abs(points[:, 1]) - (points[:, 2] - 0.66 * h) * 0.45) < 0.008) & (points[:, 2] > 0.66 * h)
+        out[band & (points[:, 0] > 0)] = p.accessory_colour
+        badge = (np.abs(points[:, 1]) < 0.03) & (np.abs(points[:, 2] - 0.645 * h) < 0.04) & (points[:, 0] > 0)
+        out[badge] = [0.95, 0.95, 0.93]
+    return out
+
+
+def _arm_colours(p: AvatarParams, cloth: _Cloth, region: str, t: np.ndarray) -> np.ndarray:
+    """Shoulder caps, sleeves (with folds and hems) over bare arms."""
+    n, skin, tone, top_rgb, out = len(t), cloth.skin, cloth.tone, cloth.top, cloth.bare
+    if region.endswith("shoulder_cap"):
         out = skin * tone[:, None] if p.top == "tank" else top_rgb
     elif region.endswith("upper_arm"):
         covered = t < (0.55 if p.top == "tshirt" else 1.01) if p.top != "tank" else np.zeros(n, bool)
@@ -451,7 +516,16 @@ def _colours(
         if p.top == "longsleeve":
             out = top_rgb * _folds(t, True, False)[:, None]
             out[t > 0.95] *= 0.82  # the cuff
-    elif region.endswith("hip_cap"):
+    return out
+
+
+def _leg_colours(
+    p: AvatarParams, cloth: _Cloth, region: str, points: np.ndarray, t: np.ndarray, v: np.ndarray
+) -> np.ndarray:
+    """Hips, trousers or shorts (folds, seams, hems), bare legs under a skirt, shoes, the skirt itself."""
+    n, h, skin, tone, out = len(t), p.height_m, cloth.skin, cloth.tone, cloth.bare
+    top_rgb, bottom_rgb, seam = cloth.top, cloth.bottom, cloth.seam
+    if region.endswith("hip_cap"):
         out = bottom_rgb if not p.dress else top_rgb
     elif region.endswith("thigh"):
         if p.bottom in ("trousers", "shorts"):
@@ -474,7 +548,15 @@ def _colours(
     elif region == "skirt":
         pleats = 1.0 - 0.1 * np.sin(np.arctan2(v[:, 1], v[:, 0]) * 14) ** 2
         out = (top_rgb if p.dress else bottom_rgb) * pleats[:, None]
-    elif region == "hair":
+    return out
+
+
+def _head_and_kit_colours(
+    p: AvatarParams, cloth: _Cloth, region: str, points: np.ndarray, normals: np.ndarray, t: np.ndarray, v: np.ndarray
+) -> np.ndarray:
+    """Hair, the face, nose, ears, fingers (creases and nails), a bag, glasses; bare skin elsewhere (palms)."""
+    n, out = len(t), cloth.bare
+    if region == "hair":
         curls = 1.0 + (0.12 if p.hair == "curly" else 0.06) * np.sin(points[:, 2] * 260) * np.sin(points[:, 1] * 240)
         out = np.array(p.hair_colour) * curls[:, None]
     elif region == "head":
