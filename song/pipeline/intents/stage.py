@@ -73,6 +73,36 @@ def _pair_geodesics(
     return out
 
 
+def _proposal_ends(proposals, objects: dict, snaps: dict[str, np.ndarray], walk: Walkable) -> tuple[dict, dict]:
+    """Facing start/goal points of every proposal between reachable objects, and geodesic rows from the starts.
+
+    The rows come from one search for all the starts.
+    """
+    ends = {}
+    for start_id, goal_id, _ in proposals:
+        if len(snaps.get(start_id, ())) and len(snaps.get(goal_id, ())) and start_id in objects and goal_id in objects:
+            start = _facing(snaps[start_id], np.mean(objects[goal_id].footprint, axis=0))
+            ends[(start_id, goal_id)] = (start, _facing(snaps[goal_id], start))
+    keys = sorted(ends)
+    rows = walk.geodesics_from(np.array([ends[k][0] for k in keys]))[0] if keys else []
+    return ends, dict(zip(keys, rows, strict=True))
+
+
+def _standing_conflict(start: np.ndarray, goal: np.ndarray, kept: list[Intent], separation: float):
+    """``(reason, detail)`` when a new start or goal stands too close to a kept one's, else None.
+
+    People stand at their start before leaving and at their goal after arriving: keep those apart.
+    """
+    if any(np.linalg.norm(start - np.asarray(k.start_xy)) < separation for k in kept):
+        return "spawn_conflict", "another start within 0.8 m"
+    standing = [np.asarray(k.goal_xy) for k in kept] + [np.asarray(k.start_xy) for k in kept]
+    if any(np.linalg.norm(goal - p) < separation for p in standing) or any(
+        np.linalg.norm(start - np.asarray(k.goal_xy)) < separation for k in kept
+    ):
+        return "standing_conflict", "start/goal within 0.8 m of another's"
+    return None
+
+
 def filter_intents(
     proposals: list[tuple[str, str, str]],
     package: ScenePackage,
@@ -89,14 +119,7 @@ def filter_intents(
     kept: list[Intent] = []
     rejected: list[RejectedIntent] = []
     routes: list[tuple[str, str]] = []
-    ends = {}  # facing start/goal points of every proposal between known, reachable objects
-    for start_id, goal_id, _ in proposals:
-        if len(snaps.get(start_id, ())) and len(snaps.get(goal_id, ())) and start_id in objects and goal_id in objects:
-            start = _facing(snaps[start_id], np.mean(objects[goal_id].footprint, axis=0))
-            ends[(start_id, goal_id)] = (start, _facing(snaps[goal_id], start))
-    keys = sorted(ends)
-    rows = walk.geodesics_from(np.array([ends[k][0] for k in keys]))[0] if keys else []
-    distance_rows = dict(zip(keys, rows, strict=True))
+    ends, distance_rows = _proposal_ends(proposals, objects, snaps, walk)
     for start_id, goal_id, activity in proposals:
         base = {"activity": activity, "start_object": start_id, "goal_object": goal_id}
         if start_id not in objects or goal_id not in objects:
@@ -128,17 +151,9 @@ def filter_intents(
             reason = "too_short" if length < cfg.min_path_m else "too_long"
             rejected.append(RejectedIntent(**base, reason=reason, detail=f"{length:.2f} m"))
             continue
-        if any(np.linalg.norm(start - np.asarray(k.start_xy)) < cfg.min_spawn_separation_m for k in kept):
-            rejected.append(RejectedIntent(**base, reason="spawn_conflict", detail="another start within 0.8 m"))
-            continue
-        # people stand at their start before leaving and at their goal after arriving: keep those apart
-        standing = [np.asarray(k.goal_xy) for k in kept] + [np.asarray(k.start_xy) for k in kept]
-        if any(np.linalg.norm(goal - p) < cfg.min_spawn_separation_m for p in standing) or any(
-            np.linalg.norm(start - np.asarray(k.goal_xy)) < cfg.min_spawn_separation_m for k in kept
-        ):
-            rejected.append(
-                RejectedIntent(**base, reason="standing_conflict", detail="start/goal within 0.8 m of another's")
-            )
+        conflict = _standing_conflict(start, goal, kept, cfg.min_spawn_separation_m)
+        if conflict:
+            rejected.append(RejectedIntent(**base, reason=conflict[0], detail=conflict[1]))
             continue
         if len(kept) >= limit:
             rejected.append(RejectedIntent(**base, reason="over_limit"))
