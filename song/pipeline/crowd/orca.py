@@ -94,17 +94,8 @@ def _left_of(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return (a[..., 0] - c[..., 0]) * (b[..., 1] - a[..., 1]) - (a[..., 1] - c[..., 1]) * (b[..., 0] - a[..., 0])
 
 
-def build_obstacles(polygons: list[np.ndarray]) -> ObstacleSet:
-    """Obstacle vertices and RVO2's obstacle BSP tree (``addObstacle`` + ``processObstacles``).
-
-    Args:
-        polygons: each (K, 2) float64, m, in RVO2 vertex order: counter-clockwise around a solid
-            obstacle, clockwise for a boundary that encloses free space. K == 2 is a single
-            two-sided segment (as in RVO2); K < 2 is skipped, as RVO2 does.
-
-    Returns:
-        The obstacle set, including the vertices RVO2 adds where the tree splits an edge.
-    """
+def _obstacle_vertices(polygons: list[np.ndarray]) -> tuple[list, list, list, list, list]:
+    """RVO2's ``addObstacle`` for every polygon: ``(points, next, previous, unit directions, convex)``."""
     pts: list[np.ndarray] = []
     nxt: list[int] = []
     prv: list[int] = []
@@ -123,6 +114,21 @@ def build_obstacles(polygons: list[np.ndarray]) -> ObstacleSet:
             edge = c - b
             dirs.append(edge / np.hypot(*edge))
             convex.append(True if k == 2 else bool(_left_of(a, b, c) >= 0.0))
+    return pts, nxt, prv, dirs, convex
+
+
+def build_obstacles(polygons: list[np.ndarray]) -> ObstacleSet:
+    """Obstacle vertices and RVO2's obstacle BSP tree (``addObstacle`` + ``processObstacles``).
+
+    Args:
+        polygons: each (K, 2) float64, m, in RVO2 vertex order: counter-clockwise around a solid
+            obstacle, clockwise for a boundary that encloses free space. K == 2 is a single
+            two-sided segment (as in RVO2); K < 2 is skipped, as RVO2 does.
+
+    Returns:
+        The obstacle set, including the vertices RVO2 adds where the tree splits an edge.
+    """
+    pts, nxt, prv, dirs, convex = _obstacle_vertices(polygons)
     left: list[int] = []
     right: list[int] = []
 
