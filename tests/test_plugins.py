@@ -231,7 +231,7 @@ def test_unknown_runtime_names_list_the_known_ones(tmp_path: Path) -> None:
         (["--policy", "nope"], "straight, astar, social, depth"),
         (["--render-backend", "nope"], "auto, numba, gsplat, reference"),
         (["--camera-model", "nope"], "ideal"),
-        (["--sensors", "nope"], "state, scan, pedestrians, rgb, depth, rgbd"),
+        (["--sensors", "nope"], "state, scan, pedestrians, map, rgb, depth, rgbd"),
     ):
         result = CliRunner().invoke(app, ["eval", "--bench", str(GOLDEN), "--out", str(tmp_path / "e"), *args])
         text = " ".join(result.output.split())

@@ -91,3 +91,59 @@ def test_one_writer_per_run_folder(tmp_path: Path) -> None:
         holder.wait()
     with folder_lock(lock, "run folder"):  # the holder is gone: its lock went with it
         pass
+
+
+def test_reset_hands_a_policy_only_what_its_sensors_entitle_it_to(tmp_path: Path) -> None:
+    """The future is not in reset: no tracks, no avatars, no factors; the map only with the map sensor."""
+    seen: dict[str, dict] = {}
+    module = tmp_path / "peek.py"
+    module.write_text(
+        textwrap.dedent(
+            """
+            import json, os
+
+
+            class Peek:
+                sensors = SENSORS
+
+                def reset(self, episode):
+                    with open(os.environ["PEEK_OUT"], "w") as f:
+                        json.dump({"pedestrians": len(episode.pedestrians), "avatars": len(episode.avatars),
+                                   "factors": len(episode.factors), "map": list(episode.static_map.cells.shape),
+                                   "path": len(episode.path), "goal": list(episode.goal_xy)}, f)
+
+                def act(self, observation):
+                    return (0.0, 0.0)
+            """
+        )
+    )
+    for name, sensors in (("plain", ("state",)), ("mapped", ("state", "map"))):
+        path = tmp_path / f"{name}.py"
+        path.write_text(module.read_text().replace("SENSORS", repr(sensors)))
+        out = tmp_path / f"{name}.json"
+        import os
+
+        os.environ["PEEK_OUT"] = str(out)
+        try:
+            result = CliRunner().invoke(
+                app, ["eval", "--bench", str(GOLDEN), "--policy", f"{path}:Peek", "--limit", "1", "-j", "1",
+                      "--out", str(tmp_path / f"eval_{name}")],
+            )  # fmt: skip
+        finally:
+            del os.environ["PEEK_OUT"]
+        assert result.exit_code == 0, result.output
+        seen[name] = json.loads(out.read_text())
+        summary = json.loads(next((tmp_path / f"eval_{name}").glob("*.json")).read_text())
+        assert summary["privileged"] is False
+    assert seen["plain"]["pedestrians"] == seen["plain"]["avatars"] == seen["plain"]["factors"] == 0
+    assert seen["plain"]["map"] == [1, 1] and seen["plain"]["path"] == 0 and len(seen["plain"]["goal"]) == 2
+    assert seen["mapped"]["pedestrians"] == 0 and seen["mapped"]["map"] != [1, 1] and seen["mapped"]["path"] >= 2
+
+
+def test_results_say_when_a_privileged_sensor_was_used(tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(
+        app, ["eval", "--bench", str(GOLDEN), "--policy", "social", "--limit", "1", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "social.json").read_text())["privileged"] is True

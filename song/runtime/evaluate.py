@@ -186,6 +186,7 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
         },
         "policy": setup.policy,
         "sensors": sensors.describe(),
+        "privileged": sensors.privileged,  # any sensor a real robot could not have (other agents' true states)
         "params": setup.params.to_json(),
         "overrides": setup.overrides,
         "official": not setup.overrides,

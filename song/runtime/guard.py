@@ -47,8 +47,33 @@ def _freeze(value: Any) -> Any:
 
 
 def frozen_copy(episode: Episode) -> Episode:
-    """A deep copy of ``episode`` with every array read-only (what a policy's ``reset`` receives)."""
+    """A deep copy of ``episode`` with every array read-only."""
     return _freeze(copy.deepcopy(episode))
+
+
+def policy_view(episode: Episode, sensors: tuple[str, ...]) -> Episode:
+    """What a policy's ``reset`` receives: the episode as its declared sensors entitle it, frozen.
+
+    Always: the ids, difficulty, start, goal, goal radius, L* and T*, t0 and the runtime parameters.
+    With the ``map`` sensor: the static map and the release's planned path too. Never: the
+    pedestrians' tracks and avatars (their states reach a policy only through the ``pedestrians``
+    sensor, step by step), the grading factors, the reference pedestrian or the predicted encounter.
+    """
+    mapped = "map" in sensors
+    grid = episode.static_map
+    blank = type(grid)(np.zeros((1, 1), np.uint8), grid.resolution, grid.origin)
+    view = dataclasses.replace(
+        episode,
+        pedestrians=[],
+        avatars=[],
+        gaussians_path=None,
+        factors={},
+        reference_ped_id=-1,
+        encounter_time=float("nan"),
+        static_map=grid if mapped else blank,
+        path=episode.path if mapped else np.zeros((0, 2)),
+    )
+    return frozen_copy(view)
 
 
 class _Timeout(BaseException):

@@ -20,7 +20,7 @@ import numpy as np
 
 from song.datasets.bench.types import Episode, pedestrian_states
 from song.runtime.avatars import AvatarCollider
-from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S, PolicyFailure, as_command, call_policy, frozen_copy
+from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S, PolicyFailure, as_command, call_policy, policy_view
 from song.runtime.metrics import EpisodeMetrics, episode_metrics
 from song.runtime.policies import Policy, policy_sensors
 from song.runtime.robot import Pose, clamp_command, integrate
@@ -179,14 +179,15 @@ def run_episode(
     """Run ``policy`` on ``episode`` until it ends; deterministic for a deterministic policy.
 
     ``sensors`` defaults to the ones the policy declares (:func:`song.runtime.policies.policy_sensors`).
-    The policy sees a read-only copy of the episode; if it raises, exits, runs past ``step_timeout_s``
+    The policy's ``reset`` sees a read-only copy of what its sensors entitle it to
+    (:func:`song.runtime.guard.policy_view`: never the pedestrians' tracks); if it raises, exits, runs past ``step_timeout_s``
     in one call or returns a malformed command, this episode ends with outcome ``error`` and the reason
     (:mod:`song.runtime.guard`).
     """
     sensors = sensors or SensorSuite.build(policy_sensors(policy), episode.params, max(64, len(episode.pedestrians)))
     runner = EpisodeRunner(episode, collider, sensors)
     try:
-        call_policy(policy.reset, frozen_copy(episode), what="reset()", timeout_s=step_timeout_s)
+        call_policy(policy.reset, policy_view(episode, sensors.names), what="reset()", timeout_s=step_timeout_s)
         while runner.outcome is None:
             action = call_policy(policy.act, runner.observation(), what="act()", timeout_s=step_timeout_s)
             runner.step(*as_command(action))

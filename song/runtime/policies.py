@@ -130,7 +130,7 @@ def _guidance(episode: Episode, lookahead: float) -> PathFollower:
 class AStarPolicy:
     """Follow the episode's smoothed A* path (blind to people)."""
 
-    sensors = ("state",)
+    sensors = ("state", "map")  # the map entitles it to the floor plan and the planned path
 
     def reset(self, episode: Episode) -> None:
         """Start following the episode's path."""
@@ -151,7 +151,7 @@ class SocialPolicy:
     closer than the safety distances, and picks the one that best approaches the pure-pursuit target.
     """
 
-    sensors = ("state", "pedestrians")
+    sensors = ("state", "map", "pedestrians")
 
     def __init__(self, horizon: float = 2.0, dt: float = 0.1, safety: float = 0.2) -> None:
         self.horizon, self.dt, self.safety = horizon, dt, safety

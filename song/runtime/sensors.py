@@ -169,6 +169,46 @@ class StateSensor(Sensor):
         }
 
 
+class MapSensor(Sensor):
+    """The static map around the robot: a ``size`` × ``size`` crop of the occupancy grid, north up.
+
+    Cells hold the map's values (255 free, 0 occupied, 127 unknown); outside the map reads 0. Declaring
+    this sensor is also what entitles a policy to the whole static map and the release's planned path
+    in ``reset`` (a robot with a floor plan of the building); without it ``reset`` hands neither.
+    """
+
+    name = "map"
+
+    def __init__(self, params: RuntimeParams, size: int = 64) -> None:
+        super().__init__(params)
+        if size < 1:
+            raise SongError(f"map sensor: size must be ≥ 1 cell (got {size})")
+        self.size = int(size)
+
+    @override
+    def space(self) -> Box:
+        return Box(0, 255, (self.size, self.size), np.uint8)
+
+    @override
+    def observe(self, view: RobotView) -> np.ndarray:
+        grid = view.episode.static_map
+        rows, cols = grid.cells.shape
+        col = int(np.floor((view.pose.x - grid.origin[0]) / grid.resolution))
+        row = rows - 1 - int(np.floor((view.pose.y - grid.origin[1]) / grid.resolution))
+        half = self.size // 2
+        out = np.zeros((self.size, self.size), np.uint8)
+        r0, c0 = row - half, col - half
+        rs, cs = max(r0, 0), max(c0, 0)
+        re, ce = min(r0 + self.size, rows), min(c0 + self.size, cols)
+        if rs < re and cs < ce:
+            out[rs - r0 : re - r0, cs - c0 : ce - c0] = grid.cells[rs:re, cs:ce]
+        return out
+
+    @override
+    def describe(self) -> dict[str, Any]:
+        return {**super().describe(), "size": self.size}
+
+
 class ScanSensor(Sensor):
     """``n_rays`` range rays (CCW from straight ahead) against walls and pedestrian body discs."""
 
@@ -328,7 +368,7 @@ class RgbdSensor(CameraSensor):
 
 
 CAMERA_SENSORS = ("rgb", "depth", "rgbd")
-for _sensor in (StateSensor, ScanSensor, PedestrianSensor, RgbSensor, DepthSensor, RgbdSensor):
+for _sensor in (StateSensor, ScanSensor, PedestrianSensor, MapSensor, RgbSensor, DepthSensor, RgbdSensor):
     plugins.add("sensor", _sensor.name, _sensor)
 
 

@@ -42,7 +42,9 @@ def test_check_env_and_contract() -> None:
     np.testing.assert_array_equal(a["state"]["goal"], b["state"]["goal"])
 
 
-@pytest.mark.parametrize("sensors", [("state",), ("scan",), ("pedestrians",), ("state", "scan", "pedestrians")])
+@pytest.mark.parametrize(
+    "sensors", [("state",), ("scan",), ("pedestrians",), ("map",), ("state", "scan", "pedestrians", "map")]
+)
 def test_every_sensor_matches_its_declared_space(sensors: tuple[str, ...]) -> None:
     pytest.importorskip("gymnasium")
     from gymnasium.utils.env_checker import check_env
@@ -61,6 +63,24 @@ def test_every_sensor_matches_its_declared_space(sensors: tuple[str, ...]) -> No
             assert env.observation_space.contains(obs)
             obs, _, terminated, truncated, _ = env.step(np.array([0.5, 0.3], dtype=np.float32))
             done = terminated or truncated
+
+
+def test_the_map_sensor_is_the_static_map_around_the_robot() -> None:
+    from song.datasets.bench import open_benchmark
+    from song.runtime.loop import EpisodeRunner
+    from song.runtime.sensors import SensorSuite
+
+    bench = open_benchmark(GOLDEN)
+    episode = next(iter(bench.episodes()))
+    suite = SensorSuite.build(["map"], episode.params, options={"map": {"size": 9}})
+    runner = EpisodeRunner(episode, None, suite)
+    crop = runner.observation()["map"]
+    grid = episode.static_map
+    rows = grid.cells.shape[0]
+    col = int((runner.pose.x - grid.origin[0]) // grid.resolution)
+    row = rows - 1 - int((runner.pose.y - grid.origin[1]) // grid.resolution)
+    np.testing.assert_array_equal(crop, grid.cells[row - 4 : row + 5, col - 4 : col + 5])
+    assert crop[4, 4] == 255  # the robot starts on a free cell
 
 
 def test_policies_and_env_read_the_release_parameters(tmp_path: Path) -> None:
