@@ -147,3 +147,53 @@ def test_results_say_when_a_privileged_sensor_was_used(tmp_path: Path) -> None:
     )
     assert result.exit_code == 0, result.output
     assert json.loads((out / "social.json").read_text())["privileged"] is True
+
+
+def _tampered(tmp_path: Path, how: str) -> Path:
+    """A copy of the golden release with its robot speed edited, or an episode's goal moved to its start."""
+    import pyarrow.parquet as pq
+
+    release = tmp_path / "bench"
+    shutil.copytree(GOLDEN / "1.0.0" if (GOLDEN / "1.0.0").is_dir() else GOLDEN, release)
+    if how == "speed":
+        info = json.loads((release / "meta" / "info.json").read_text())
+        info["robot"]["max_speed_mps"] = 5.0
+        (release / "meta" / "info.json").write_text(json.dumps(info))
+    else:
+        path = next((release / "data" / "episodes").glob("*.parquet"))
+        table = pq.read_table(path)
+        goals = table.column("goal_position").to_pylist()
+        goals[0] = table.column("start_position").to_pylist()[0]
+        import pyarrow as pa
+
+        index = table.schema.get_field_index("goal_position")
+        table = table.set_column(index, table.schema.field(index), pa.array(goals, table.schema.field(index).type))
+        pq.write_table(table, path)
+    return release
+
+
+@pytest.mark.parametrize("how", ["speed", "goal"])
+def test_a_release_edited_after_export_is_refused_where_it_is_used(tmp_path: Path, how: str) -> None:
+    release = _tampered(tmp_path, how)
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(app, ["eval", "--bench", str(release), "--policy", "astar", "--out", str(out)])
+    text = " ".join(result.output.split())
+    assert result.exit_code != 0 and "--allow-modified" in text and "edited" in text, text
+    assert not out.exists()
+    collect = CliRunner().invoke(
+        app, ["collect", "--bench", str(release), "--out", str(tmp_path / "ds"), "--split", "test", "--limit", "1"]
+    )
+    assert collect.exit_code != 0 and "edited" in " ".join(collect.output.split())
+    pytest.importorskip("gymnasium")
+    from song.errors import BenchmarkError
+    from song.runtime.env import SongNavEnv
+
+    with pytest.raises(BenchmarkError, match="edited"):
+        SongNavEnv(str(release))
+    result = CliRunner().invoke(
+        app,
+        ["eval", "--bench", str(release), "--policy", "astar", "--out", str(out), "--limit", "2", "--allow-modified"],
+    )
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "astar.json").read_text())
+    assert summary["official"] is False and "edited" in summary["release_check"]

@@ -56,6 +56,9 @@ def eval_command(
     override: bool = typer.Option(
         False, "--override", help="allow [robot]/[camera] values that differ from the release's (marked unofficial)"
     ),
+    allow_modified: bool = typer.Option(
+        False, "--allow-modified", help="run on a release edited since export (results marked unofficial)"
+    ),
 ) -> None:
     """Run policies on every episode; write per-episode Parquet and the paper's metric table.
 
@@ -86,7 +89,7 @@ def eval_command(
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:
-        setup = make_setup(release, name, sensors, params, changed, camera, step_timeout)
+        setup = make_setup(release, name, sensors, params, changed, camera, step_timeout, allow_modified)
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:
@@ -116,6 +119,9 @@ def collect_command(
     limit: int | None = typer.Option(None, "--limit", min=1, help="only the first N episodes of the split"),
     keep: str = typer.Option("success", "--keep", help="success (only successful rollouts) | all"),
     workers: int = WorkersOption,
+    allow_modified: bool = typer.Option(
+        False, "--allow-modified", help="collect from a release edited since export (recorded in the dataset)"
+    ),
 ) -> None:
     """Roll a policy out on training episodes; write what imitation learning needs (LeRobot dataset layout)."""
     from song.runtime.collect import collect
@@ -123,7 +129,16 @@ def collect_command(
     width, height = parse_size(resolution, "--resolution")
     camera = {"width": width, "height": height}
     summary = collect(
-        bench, policy, out, split, tuple(sensors.split(",")), limit, camera, keep, resolve_workers(workers)
+        bench,
+        policy,
+        out,
+        split,
+        tuple(sensors.split(",")),
+        limit,
+        camera,
+        keep,
+        resolve_workers(workers),
+        allow_modified=allow_modified,
     )
     console.print(
         f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "

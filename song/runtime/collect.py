@@ -271,6 +271,7 @@ def collect(
     keep: str = "success",
     workers: int = 1,
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
+    allow_modified: bool = False,
 ) -> CollectSummary:
     """Roll ``policy_name`` out on the ``split`` episodes of a release into a LeRobot dataset at ``out``.
 
@@ -286,6 +287,7 @@ def collect(
         workers: processes rolling episodes out in parallel (files are written in release order, so
             the dataset does not depend on the worker count).
         step_timeout_s: a policy call taking longer fails its episode.
+        allow_modified: collect from a release that fails its integrity check (recorded in ``info.json``).
 
     Raises:
         SongError: an unknown sensor or ``keep``, an existing non-empty ``out``, or an unknown split.
@@ -299,6 +301,7 @@ def collect(
     if out.exists() and any(out.iterdir()):
         raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
     bench = open_benchmark(bench_path)
+    bench.require_intact(allow_modified)
     episodes = list(bench.episodes(split=split))[: limit if limit is not None else None]
     if not episodes:
         raise SongError(f"{bench_path}: no '{split}' episodes to collect")
@@ -314,7 +317,8 @@ def collect(
     written = _write_episodes(out, kept, fps)
     successes = sum(r["outcome"] == "success" for r in rollouts)
     about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
-             "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes}  # fmt: skip
+             "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
+             "release_check": bench.integrity or "ok"}  # fmt: skip
     _write_meta(out, kept, written, fps, split, about)
     return CollectSummary(out, len(kept), written["frames"], successes, len(rollouts))
 

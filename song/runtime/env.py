@@ -61,11 +61,13 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         sensors: tuple[str, ...] | list[str] | str = ("state", "scan"),
         params: RuntimeParams | None = None,
         sensor_options: dict[str, dict] | None = None,
+        allow_modified: bool = False,
     ) -> None:
         _require_gym()
         from gymnasium import spaces
 
         self.bench = open_benchmark(bench, version)
+        self.bench.require_intact(allow_modified)  # a release edited after export is refused
         self.params = params or self.bench.params
         self.sensors = SensorSuite.build(sensors, self.params, self.bench.max_pedestrians, sensor_options)
         self.episode_ids = [e.episode_id for e in self.bench.episodes(difficulty=difficulty)]

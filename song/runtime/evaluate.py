@@ -84,8 +84,9 @@ def make_setup(
     overrides: dict[str, list[Any]] | None = None,
     camera: dict[str, Any] | None = None,
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
+    allow_modified: bool = False,
 ) -> EvalSetup:
-    """The setup of one policy.
+    """The setup of one policy; a release that no longer matches its fingerprint is refused first.
 
     Args:
         bench: the opened release.
@@ -95,7 +96,9 @@ def make_setup(
         overrides: what ``params`` changed from the release, as recorded.
         camera: options shared by the camera sensors: ``width``, ``height``, ``backend``.
         step_timeout_s: per-call time limit of the policy (its episode fails past it).
+        allow_modified: run on a release that fails :attr:`Benchmark.integrity` (results unofficial).
     """
+    bench.require_intact(allow_modified)
     names = parse_sensor_names([*policy_sensors(load_policy(policy)), *parse_sensor_names(sensors or [])])
     options = {"camera": dict(camera)} if camera else {}
     plugins.check_name("render_backend", options.get("camera", {}).get("backend", "auto"), extra=("auto",))
@@ -189,7 +192,8 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
         "privileged": sensors.privileged,  # any sensor a real robot could not have (other agents' true states)
         "params": setup.params.to_json(),
         "overrides": setup.overrides,
-        "official": not setup.overrides,
+        "official": not setup.overrides and not bench.integrity,
+        "release_check": bench.integrity or "ok",  # the fingerprint, info.json and the tables, checked at open
         "step_timeout_s": setup.step_timeout_s,
     }
 

@@ -19,7 +19,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 import song
-from song.datasets.bench.info import SEMVER, Generator, Info, TableInfo
+from song.datasets.bench.info import SEMVER, Generator, Info, TableInfo, fingerprint_of  # noqa: F401 (re-exported)
 from song.datasets.bench.io import BlobStore, write_parquet
 from song.datasets.bench.schema import (
     AVATARS,
@@ -41,10 +41,8 @@ from song.datasets.run.layout import AMASS_FILE, MOTION_META_FILE
 from song.datasets.scenes.package import GAUSSIANS, SEMANTIC_MAP, USD_PROXY, load_scene_package
 from song.errors import BenchmarkError, SongError
 from song.util import (
-    canonical_json,
     process_gone,
     read_json_object,
-    sha256_bytes,
     sha256_file,
     write_json_atomic,
 )
@@ -251,18 +249,6 @@ def manifest_rows(release: Path, rows_by_path: dict[str, int]) -> list[dict[str,
             {"path": rel, "sha256": sha256_file(path), "bytes": path.stat().st_size, "rows": rows_by_path.get(rel)}
         )
     return rows
-
-
-def fingerprint_of(rows: list[dict[str, Any]], info: dict[str, Any] | None = None) -> str:
-    """sha256 of the sorted manifest's canonical text (``path sha256 bytes`` per line) and of ``info``.
-
-    ``info`` is ``meta/info.json`` as a dict without its ``fingerprint`` field (releases of schema 1.2
-    and later), so editing the recorded robot, camera or collision parameters breaks the fingerprint.
-    """
-    text = "".join(f"{r['path']}\t{r['sha256']}\t{r['bytes']}\n" for r in sorted(rows, key=lambda r: r["path"]))
-    if info is not None:
-        text += f"{INFO_PATH}\t{canonical_json({k: v for k, v in info.items() if k != 'fingerprint'})}\n"
-    return sha256_bytes(text.encode("utf-8"))
 
 
 def _changelog(version: str, parent: str | None, notes: str, counts: dict[str, Any]) -> str:

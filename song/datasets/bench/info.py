@@ -13,6 +13,7 @@ from song.config import CameraConfig, RobotConfig
 from song.datasets.bench.schema import FORMAT_NAME, INFO_PATH, SCHEMA_VERSION, schema_major
 from song.datasets.bench.types import RuntimeParams
 from song.errors import BenchmarkError, SchemaVersionError
+from song.util import canonical_json, sha256_bytes
 
 SEMVER = re.compile(r"(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)")  # always matched in full
 
@@ -154,3 +155,15 @@ def resolve_version(bench_dir: str | Path, version: str | None) -> Path:
     if version not in versions:
         raise BenchmarkError(f"{bench_dir}: version {version} not found; available: {', '.join(versions)}")
     return Path(bench_dir) / version
+
+
+def fingerprint_of(rows: list[dict[str, Any]], info: dict[str, Any] | None = None) -> str:
+    """sha256 of the sorted manifest's canonical text (``path sha256 bytes`` per line) and of ``info``.
+
+    ``info`` is ``meta/info.json`` as a dict without its ``fingerprint`` field (releases of schema 1.2
+    and later), so editing the recorded robot, camera or collision parameters breaks the fingerprint.
+    """
+    text = "".join(f"{r['path']}\t{r['sha256']}\t{r['bytes']}\n" for r in sorted(rows, key=lambda r: r["path"]))
+    if info is not None:
+        text += f"{INFO_PATH}\t{canonical_json({k: v for k, v in info.items() if k != 'fingerprint'})}\n"
+    return sha256_bytes(text.encode("utf-8"))

@@ -6,6 +6,7 @@ Reads only the release's own files; never imports ``song.pipeline``.
 from __future__ import annotations
 
 import functools
+import json
 import re
 from collections.abc import Iterator
 from functools import lru_cache
@@ -15,12 +16,22 @@ import numpy as np
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from song.datasets.bench.info import Info, check_schema_version, read_info, resolve_version, runtime_params
+from song.datasets.bench.info import (
+    Info,
+    check_schema_version,
+    fingerprint_of,
+    read_info,
+    resolve_version,
+    runtime_params,
+    version_key,
+)
 from song.datasets.bench.schema import (
     AVATARS_PATH,
     DIFFICULTIES,
     EPISODES_PATH,
+    INFO_FINGERPRINT_SINCE,
     INFO_PATH,
+    MANIFEST_PATH,
     META_SCHEMA_VERSION,
     PEDESTRIANS_PATH,
     SCENES_PATH,
@@ -59,6 +70,47 @@ class Benchmark:
     def version(self) -> str:
         """The release's dataset version."""
         return self.info.dataset_version
+
+    @functools.cached_property
+    def integrity(self) -> str:
+        """Why the release no longer matches its fingerprint, or "" when it does (checked once, cheaply).
+
+        ``meta/info.json`` and the manifest against the fingerprint, the four tables against the
+        manifest's sha256; the blobs are checked as they are read (:meth:`blob`). What ``song bench
+        verify`` does in full, at the cost of hashing the tables alone.
+        """
+        try:
+            manifest = pq.read_table(self._inside(MANIFEST_PATH, "manifest")).to_pylist()
+            raw = json.loads(self._inside(INFO_PATH, "release info").read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            return f"{MANIFEST_PATH} cannot be read ({exc})"
+        covered = version_key(self.info.schema_version) >= INFO_FINGERPRINT_SINCE
+        if fingerprint_of(manifest, raw if covered else None) != self.info.fingerprint:
+            return "meta/info.json or the manifest was edited (the fingerprint no longer matches)"
+        listed = {row.get("path"): row for row in manifest}
+        for rel in (
+            EPISODES_PATH.format(part=0),
+            SCENES_PATH,
+            PEDESTRIANS_PATH.format(part=0),
+            AVATARS_PATH.format(part=0),
+        ):
+            row = listed.get(rel)
+            if row is None or sha256_file(self._inside(rel, "table")) != row.get("sha256"):
+                return f"{rel} was edited (its sha256 is not the manifest's)"
+        return ""
+
+    def require_intact(self, allow_modified: bool = False) -> str:
+        """Refuse a release that fails :attr:`integrity` unless ``allow_modified``; the problem ("" if none).
+
+        Raises:
+            BenchmarkError: one line naming the release and what changed.
+        """
+        if self.integrity and not allow_modified:
+            raise BenchmarkError(
+                f"{self.root}: {self.integrity}; results on it would not be the benchmark's "
+                "(`song bench verify` lists every change; --allow-modified runs it, marked unofficial)"
+            )
+        return self.integrity
 
     @functools.cached_property
     def max_pedestrians(self) -> int:

@@ -9,7 +9,7 @@ from typing import Any
 
 import pyarrow.parquet as pq
 
-from song.datasets.bench.info import Info, list_versions, read_info, resolve_version, version_key  # noqa: F401
+from song.datasets.bench.info import Info, fingerprint_of, list_versions, read_info, resolve_version, version_key  # noqa: F401
 from song.datasets.bench.load import Benchmark
 from song.datasets.bench.schema import EPISODES_PATH, INFO_FINGERPRINT_SINCE, INFO_PATH, MANIFEST_PATH
 from song.util import sha256_file, sha256_json
@@ -33,8 +33,6 @@ class VerifyReport:
 
 def verify_release(release: str | Path) -> VerifyReport:
     """Recompute every file's sha256 against the manifest and the manifest against the fingerprint."""
-    from song.datasets.bench.export import fingerprint_of
-
     release = Path(release)
     info = read_info(release / INFO_PATH)
     try:
