@@ -197,3 +197,49 @@ def test_a_release_edited_after_export_is_refused_where_it_is_used(tmp_path: Pat
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "astar.json").read_text())
     assert summary["official"] is False and "edited" in summary["release_check"]
+
+
+def _reseal(release: Path) -> None:
+    """Rewrite the manifest's hashes and the fingerprint after editing files (what a forger would do)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from song.datasets.bench.info import fingerprint_of
+    from song.util import sha256_file
+
+    manifest_path = release / "meta" / "manifest.parquet"
+    manifest = pq.read_table(manifest_path)
+    rows = manifest.to_pylist()
+    for row in rows:
+        row["sha256"] = sha256_file(release / row["path"])
+        row["bytes"] = (release / row["path"]).stat().st_size
+    pq.write_table(pa.Table.from_pylist(rows, manifest.schema), manifest_path)
+    info = json.loads((release / "meta" / "info.json").read_text())
+    info["fingerprint"] = fingerprint_of(rows, info)
+    (release / "meta" / "info.json").write_text(json.dumps(info))
+
+
+def test_ids_from_a_hostile_release_never_become_paths_outside_out(tmp_path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    release = tmp_path / "deep" / "er" / "bench"
+    shutil.copytree(GOLDEN / "1.0.0", release)
+    path = next((release / "data" / "episodes").glob("*.parquet"))
+    table = pq.read_table(path)
+    ids = table.column("episode_id").to_pylist()
+    hostile = "../../escape"
+    index = table.schema.get_field_index("episode_id")
+    table = table.set_column(index, table.schema.field(index), pa.array([hostile, *ids[1:]], pa.string()))
+    pq.write_table(table, path)
+    _reseal(release)  # a consistent hostile release: its manifest and fingerprint match the edit
+    before = sorted(p for p in tmp_path.rglob("*"))
+    out = tmp_path / "deep" / "er" / "figs"
+    for command in (["viz", "episode", "--bench", str(release), "--episode", hostile, "--out", str(out)],
+                    ["viz", "pov", "--bench", str(release), "--episode", hostile, "--policy", "straight",
+                     "--resolution", "32x24", "--out", str(out)]):  # fmt: skip
+        result = CliRunner().invoke(app, command)
+        text = " ".join(result.output.split())
+        assert result.exit_code != 0 and "episode id '../../escape'" in text, text
+    after = sorted(p for p in tmp_path.rglob("*") if not p.is_relative_to(out))
+    assert after == before  # nothing written anywhere but --out (and nothing there either)

@@ -9,6 +9,7 @@ import numpy as np
 from song.datasets.run import RunFolder, read_crowd, read_intents, read_run_info
 from song.datasets.scenes import load_scene_package
 from song.render.video import write_mp4
+from song.util import check_id
 from song.viz.draw import colour, label, write_png
 from song.viz.scene import draw_scene
 
@@ -38,7 +39,7 @@ def render_crowd(run_dir: str | Path, scene_id: str, out_dir: str | Path, video:
         intent = intents.get(ped_id)
         text = f"{ped_id}: {intent.start_object} -> {intent.goal_object}" if intent else f"{ped_id}"
         label(still, text, (int(pts[0][0]) + 6, int(pts[0][1]) - 6), colour(ped_id), 0.38)
-    written = [write_png(out_dir / f"{scene_id}_crowd.png", still)]
+    written = [write_png(out_dir / f"{check_id(scene_id, 'scene id')}_crowd.png", still)]
     if video and tracks:
         last = int(max(d[-1, 0] for d in tracks.values()))
         frames = []

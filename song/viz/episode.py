@@ -10,6 +10,7 @@ import pyarrow.parquet as pq
 
 from song.datasets.bench import open_benchmark, pedestrian_states
 from song.render.video import write_mp4
+from song.util import check_id
 from song.viz.draw import colour, label, map_canvas, write_png
 
 ENCOUNTER_RADIUS_M = 3.0
@@ -67,7 +68,7 @@ def render_episode(
             still, f"{episode_id} [{episode.difficulty}] L*={episode.geodesic_distance:.1f} m", (10, 20), (0, 0, 0), 0.5
         )
     out_dir = Path(out_dir)
-    written = [write_png(out_dir / f"{episode_id}.png", still)]
+    written = [write_png(out_dir / f"{check_id(episode_id, 'episode id')}.png", still)]
     if video:
         n = len(robot) if robot is not None else int(episode.optimal_time / 0.1) + 1
         frames = []

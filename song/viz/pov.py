@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,7 @@ from song.runtime.evaluate import make_setup
 from song.runtime.loop import EpisodeRunner, run_episode
 from song.runtime.policies import load_policy
 from song.runtime.sensors import SensorSuite
+from song.util import check_id
 from song.viz.draw import Canvas, colour, label, map_canvas, write_png
 
 PANEL_HEIGHT = 360  # px of every panel in the video
@@ -112,7 +114,7 @@ def render_pov(
     result = run_episode(episode, load_policy(policy), make_collider(episode), sensors, on_step=grab)
     label(frames[-1], f"outcome: {result.outcome}", (10, 48), (0, 0, 0), 0.6)
     out_dir = Path(out_dir)
-    stem = f"{episode_id}_{policy.replace(':', '_').replace('/', '_')}_pov"
+    stem = f"{check_id(episode_id, 'episode id')}_{re.sub(r'[^A-Za-z0-9_-]', '_', policy)}_pov"
     fps = setup.params.robot.control_hz
     video = write_mp4(out_dir / f"{stem}.mp4", frames, fps=fps)
     picks = np.linspace(0, len(frames) - 1, min(STRIP_FRAMES, len(frames))).round().astype(int)

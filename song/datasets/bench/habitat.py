@@ -31,7 +31,7 @@ import numpy as np
 from song.datasets.bench.load import Benchmark
 from song.datasets.bench.types import StaticMap
 from song.datasets.scenes.usd import ProxyBox, ProxyMesh, box_mesh
-from song.util import write_bytes_atomic
+from song.util import check_id, write_bytes_atomic
 
 SCENES_DIR = "scenes"
 WALL_HEIGHT_M = 2.5  # blocked cells become solids this tall for a scene without a USD proxy
@@ -69,12 +69,12 @@ def export_habitat(bench: Benchmark, out: str | Path) -> Path:
     out = Path(out)
     rows = bench.episodes_table.to_pylist()
     root = out.parent if out.name.endswith(".json.gz") else out
-    for scene_id in sorted({row["scene_id"] for row in rows}):
+    for scene_id in sorted({check_id(row["scene_id"], "scene id") for row in rows}):  # ids from the release name files
         write_scene_glb(bench, scene_id, root / SCENES_DIR / f"{scene_id}.glb")
         _write_gzip_json(root / SCENES_DIR / f"{scene_id}.pedestrians.json.gz", _pedestrians(bench, scene_id))
     if out.name.endswith(".json.gz"):
         return _write_habitat(bench, rows, out)
-    for split in sorted(bench.splits()):
+    for split in sorted(check_id(s, "split") for s in bench.splits()):
         chosen = [r for r in rows if (r.get("split") or "test") == split]
         _write_habitat(bench, chosen, out / split / f"{split}.json.gz")
     return out
