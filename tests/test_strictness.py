@@ -243,3 +243,38 @@ def test_ids_from_a_hostile_release_never_become_paths_outside_out(tmp_path: Pat
         assert result.exit_code != 0 and "episode id '../../escape'" in text, text
     after = sorted(p for p in tmp_path.rglob("*") if not p.is_relative_to(out))
     assert after == before  # nothing written anywhere but --out (and nothing there either)
+
+
+def test_a_second_writer_is_refused_and_a_foreign_folder_is_never_a_run(tmp_path: Path) -> None:
+    from song.runtime.collect import LOCK_FILE, collect
+
+    out = tmp_path / "dataset"
+    out.mkdir()
+    lock = out / LOCK_FILE
+    holder = subprocess.Popen(
+        [sys.executable, "-c", f"import fcntl, time; f = open({str(lock)!r}, 'a+b'); "
+         "fcntl.flock(f.fileno(), fcntl.LOCK_EX); print('held', flush=True); time.sleep(30)"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(SongError, match="another song process is writing this dataset folder"):
+            collect(str(GOLDEN), "straight", out, split="test", limit=1)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert [p.name for p in out.iterdir()] == [LOCK_FILE]  # the first writer's folder is untouched
+    foreign = tmp_path / "notes"
+    foreign.mkdir()
+    (foreign / "run.json").write_text('{"mine": true}')
+    from tests.conftest import build_two_room_scene
+
+    build_two_room_scene(tmp_path / "scenes", "a")
+    result = CliRunner().invoke(app, ["synth", "--scenes", str(tmp_path / "scenes"), "--out", str(foreign)])
+    assert result.exit_code != 0 and "not a run folder" in " ".join(result.output.split())
+    assert (foreign / "run.json").read_text() == '{"mine": true}'
+    (foreign / "run.json").unlink()
+    (foreign / "todo.txt").write_text("mine")
+    result = CliRunner().invoke(app, ["synth", "--scenes", str(tmp_path / "scenes"), "--out", str(foreign)])
+    assert result.exit_code != 0 and "not a song run" in " ".join(result.output.split())
+    assert sorted(p.name for p in foreign.iterdir()) == ["todo.txt"]

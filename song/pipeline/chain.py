@@ -337,6 +337,7 @@ def iter_run(
     """
     check_plugin_names(config)  # an unknown name fails here, before anything is written
     run = RunFolder(Path(run_dir))
+    _refuse_foreign_folder(run)
     run.root.mkdir(parents=True, exist_ok=True)
     roots = find_scene_packages(scenes_dir)
     if scene_ids is not None:
@@ -371,6 +372,19 @@ def check_plugin_names(config: SongConfig) -> None:
             plugins.check_name(kind, name, extra)
         except plugins.PluginError as exc:
             raise ConfigError("<config>", key, str(exc)) from None
+
+
+def _refuse_foreign_folder(run: RunFolder) -> None:
+    """Refuse a non-empty folder that is not a run (its files are someone else's), or a broken run.json.
+
+    Raises:
+        StageError: one line naming the folder or its run.json.
+    """
+    if not run.root.is_dir() or not any(run.root.iterdir()):
+        return
+    if not run.info_file.is_file():
+        raise StageError(f"{run.root}: not empty and not a song run (no run.json); choose another --out")
+    read_run_info(run.root)  # a run.json that is not a run's is refused with its own one line
 
 
 def read_run(run_dir: str | Path) -> tuple[Path, SongConfig]:

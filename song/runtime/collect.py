@@ -45,10 +45,11 @@ from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.loop import EpisodeRunner, run_episode
 from song.runtime.policies import load_policy, policy_sensors
 from song.runtime.sensors import Box, SensorSuite, parse_sensor_names
-from song.util import write_json_atomic, write_text_atomic
+from song.util import folder_lock, write_json_atomic, write_text_atomic
 
 CODEBASE_VERSION = "v2.1"
 CHUNK_SIZE = 1000
+LOCK_FILE = ".song.lock"  # held while a collect writes the dataset folder
 TASK = "navigate to the goal among pedestrians"
 DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
 VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
@@ -298,29 +299,35 @@ def collect(
     if keep not in ("success", "all"):
         raise SongError(f"collect: --keep {keep!r}: use success or all")
     out = Path(out)
-    if out.exists() and any(out.iterdir()):
+    if out.exists() and not out.is_dir():
+        raise SongError(f"{out}: a file; collect writes a dataset folder (choose another --out)")
+    if out.is_dir() and any(p.name != LOCK_FILE for p in out.iterdir()):
         raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
     bench = open_benchmark(bench_path)
     bench.require_intact(allow_modified)
     episodes = list(bench.episodes(split=split))[: limit if limit is not None else None]
     if not episodes:
         raise SongError(f"{bench_path}: no '{split}' episodes to collect")
-    load_policy(policy_name)  # an unknown policy fails here, before any work
-    fps = float(bench.params.robot.control_hz)
-    jobs = [
-        CollectJob(str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s)
-        for e in episodes
-    ]
-    done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
-    rollouts = [done[e.episode_id] for e in episodes]  # in release order, whatever the workers
-    kept = [r for r in rollouts if r["steps"] and (keep == "all" or r["outcome"] == "success")]
-    written = _write_episodes(out, kept, fps)
-    successes = sum(r["outcome"] == "success" for r in rollouts)
-    about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
-             "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
-             "release_check": bench.integrity or "ok"}  # fmt: skip
-    _write_meta(out, kept, written, fps, split, about)
-    return CollectSummary(out, len(kept), written["frames"], successes, len(rollouts))
+    load_policy(policy_name)  # an unknown policy fails here, before anything is written
+    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out / LOCK_FILE, "dataset folder"):  # a second collect into --out stops at once
+        if any(p.name != LOCK_FILE for p in out.iterdir()):  # checked again under the lock
+            raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
+        fps = float(bench.params.robot.control_hz)
+        jobs = [
+            CollectJob(str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s)
+            for e in episodes
+        ]
+        done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
+        rollouts = [done[e.episode_id] for e in episodes]  # in release order, whatever the workers
+        kept = [r for r in rollouts if r["steps"] and (keep == "all" or r["outcome"] == "success")]
+        written = _write_episodes(out, kept, fps)
+        successes = sum(r["outcome"] == "success" for r in rollouts)
+        about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
+                 "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
+                 "release_check": bench.integrity or "ok"}  # fmt: skip
+        _write_meta(out, kept, written, fps, split, about)
+        return CollectSummary(out, len(kept), written["frames"], successes, len(rollouts))
 
 
 def _write_episodes(out: Path, kept: list[dict[str, Any]], fps: float) -> dict[str, Any]:

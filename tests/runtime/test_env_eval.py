@@ -95,7 +95,12 @@ def test_policies_and_env_read_the_release_parameters(tmp_path: Path) -> None:
     info = json.loads((copy / "meta/info.json").read_text())
     info["robot"]["max_speed_mps"] = 0.3
     info["pedestrian_radius_m"] = 0.4
-    (copy / "meta/info.json").write_text(json.dumps(info))
+    import pyarrow.parquet as pq
+
+    from song.datasets.bench.info import fingerprint_of
+
+    info["fingerprint"] = fingerprint_of(pq.read_table(copy / "meta/manifest.parquet").to_pylist(), info)
+    (copy / "meta/info.json").write_text(json.dumps(info))  # a release that records other parameters
     bench = open_benchmark(copy)
     assert bench.params.robot.max_speed_mps == 0.3 and bench.params.pedestrian_radius_m == 0.4
     env = SongNavEnv(str(copy))
