@@ -11,6 +11,7 @@ process-wide concurrency limit. API keys never reach a file, a log line or an er
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import threading
@@ -64,6 +65,31 @@ def scrub(text: str) -> str:
     return text
 
 
+def scrub_reply(text: str) -> str:
+    """:func:`scrub` a JSON reply, and its decoded strings too.
+
+    A key written with JSON escapes (a letter as a ``u0041`` escape) survives a text scrub; it is caught
+    in the decoded strings and the reply re-encoded. Text that is not JSON is scrubbed as text.
+    """
+    text = scrub(text)
+    try:
+        data = json.loads(text)
+    except ValueError:
+        return text
+
+    def clean(value):
+        if isinstance(value, str):
+            return scrub(value)
+        if isinstance(value, list):
+            return [clean(v) for v in value]
+        if isinstance(value, dict):
+            return {scrub(str(k)): clean(v) for k, v in value.items()}
+        return value
+
+    cleaned = clean(data)
+    return text if cleaned == data else json.dumps(cleaned, ensure_ascii=False)
+
+
 def _seconds(value: object) -> float | None:
     """``"1.5"``, ``"20s"`` or a number → seconds; None when absent or unreadable."""
     try:
@@ -110,7 +136,11 @@ class GeminiClient:
             raise MissingDependencyError("google-genai", "gemini") from exc
         self.model = model
         self._types = types
-        options = types.HttpOptions(timeout=int(timeout_s * 1000), **({"base_url": base_url} if base_url else {}))
+        options = types.HttpOptions(
+            timeout=int(timeout_s * 1000),
+            client_args={"follow_redirects": False},  # the key header never goes to another origin
+            **({"base_url": base_url} if base_url else {}),
+        )
         try:
             self._client = genai.Client(http_options=options)
         except Exception as exc:  # no key, bad options
@@ -126,8 +156,13 @@ class GeminiClient:
         try:
             response = self._client.models.generate_content(model=self.model, contents=prompt, config=config)
         except errors.APIError as exc:
+            if 300 <= (exc.code or 0) < 400:
+                raise LLMError(
+                    f"gemini answered with a redirect (HTTP {exc.code}); redirects are not followed"
+                ) from None
             if exc.code in RETRY_STATUS:
-                delay = _gemini_retry_delay((exc.details or {}).get("error", {}).get("details"))
+                error = exc.details.get("error") if isinstance(exc.details, dict) else None
+                delay = _gemini_retry_delay(error.get("details") if isinstance(error, dict) else None)
                 raise TransientLLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}"), delay) from None
             raise LLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}")) from None
         except Exception as exc:  # time-outs, refused or dropped connections (httpx errors): all transient
@@ -222,7 +257,12 @@ class OpenAICompatibleClient:
             raise LLMRefusal(scrub(f"openai-compatible model refused: {refusal}"))
         if not message.content and getattr(choice, "finish_reason", None) == "content_filter":
             raise LLMRefusal("openai-compatible reply withheld by the server's content filter")
-        return message.content or ""
+        content = message.content
+        if isinstance(content, (dict, list)):  # a server that sends the JSON object itself, not its text
+            return json.dumps(content)
+        if content is not None and not isinstance(content, str):
+            raise LLMError(f"openai-compatible reply content is a {type(content).__name__}, not text")
+        return content or ""
 
 
 def _slot(limit: int) -> threading.BoundedSemaphore:
@@ -259,7 +299,7 @@ def structured_call(
         except ValidationError:
             pass  # a stale or damaged cache entry: ask again
     rng = rng or random.Random(0)
-    text = scrub(_with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrency, rng))
+    text = scrub_reply(_with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrency, rng))
     try:
         result = _parse(text, schema)
     except ValidationError as exc:
@@ -267,7 +307,7 @@ def structured_call(
             f"{prompt}\n\nYour previous reply was not valid JSON for the required schema "
             f"({exc.error_count()} problems, first: {exc.errors()[0]['msg']}). Reply again with only valid JSON."
         )
-        text = scrub(_with_retries(client, repair, schema, max_retries, backoff_s, max_concurrency, rng))
+        text = scrub_reply(_with_retries(client, repair, schema, max_retries, backoff_s, max_concurrency, rng))
         try:
             result = _parse(text, schema)
         except ValidationError as again:

@@ -11,7 +11,9 @@ A script is a list of steps ``(status, text, delay_s)``; ``status`` is an HTTP c
 the connection), ``"redirect"`` (302 to the URL in ``text``) or ``"refuse"`` (a 200 without content, as
 the services answer a safety block: Gemini's ``promptFeedback.blockReason`` — or, with ``text`` =
 ``"candidate"``, a candidate stopped with ``finishReason: SAFETY`` — and OpenAI's ``message.refusal``,
-or with ``text`` = ``"content_filter"``, that finish reason). ``requests`` records what arrived.
+or with ``text`` = ``"content_filter"``, that finish reason), ``"object"`` (the reply's JSON object as the
+message content itself, not its text) or ``"429-string"`` (a 429 whose ``error`` is a bare string).
+``requests`` records what arrived.
 """
 
 from __future__ import annotations
@@ -66,6 +68,13 @@ class FakeServer:
                     return
                 if status == "redirect":
                     self._send(302, b"", {"Location": text})
+                    return
+                if status == "object":  # a server that sends the JSON object itself as the message content
+                    payload = {"choices": [{"index": 0, "message": {"role": "assistant", "content": json.loads(text)}}]}
+                    self._send(200, json.dumps(payload).encode(), {"Content-Type": "application/json"})
+                    return
+                if status == "429-string":  # a rate limit whose error is a bare string
+                    self._send(429, json.dumps({"error": text}).encode(), {"Content-Type": "application/json"})
                     return
                 if status == "refuse":
                     self._send(200, json.dumps(self._refusal(text)).encode(), {"Content-Type": "application/json"})

@@ -165,11 +165,12 @@ def test_a_429_suggested_delay_is_honoured(make_scene, tmp_path, monkeypatch, ki
     assert time.perf_counter() - start >= RETRY_DELAY_S  # the back-off alone would be ~0.01 s
 
 
-def test_a_redirect_never_carries_the_key_elsewhere(make_scene, tmp_path, monkeypatch) -> None:
-    elsewhere = FakeServer("openai", [(200, DESC, 0)] * 4)
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_a_redirect_never_carries_the_key_elsewhere(make_scene, tmp_path, monkeypatch, kind) -> None:
+    elsewhere = FakeServer(kind, [(200, DESC, 0)] * 4)
     try:
         script = [("redirect", elsewhere.url + "/v1/chat/completions", 0)] * 4
-        result, _ = _run(make_scene, tmp_path, monkeypatch, "openai", script, max_retries=1)
+        result, _ = _run(make_scene, tmp_path, monkeypatch, kind, script, max_retries=1)
     finally:
         elsewhere.close()
     assert elsewhere.requests == []  # not followed at all
@@ -199,3 +200,24 @@ def test_a_safety_block_is_recorded_as_such_without_a_repair(make_scene, tmp_pat
     assert result.provenance.fallback and said in result.llm_error, result.llm_error
     assert "Invalid JSON" not in result.llm_error
     assert len(server.requests) == 1  # no repair request, no retry: the same prompt would be refused again
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_a_key_written_with_json_escapes_is_stored_nowhere(make_scene, tmp_path, monkeypatch, kind) -> None:
+    escaped = f"\\u{ord(KEY[0]):04x}" + KEY[1:]  # the key's first letter as a JSON escape
+    echo = '{"description": "An office. The key is ' + escaped + '"}'
+    result, _ = _run(make_scene, tmp_path, monkeypatch, kind, [(200, echo, 0), (200, GOOD, 0)])
+    assert not result.provenance.fallback and "***" in result.description
+    _no_key_anywhere(tmp_path, result)
+
+
+def test_a_reply_whose_content_is_the_json_object_itself_is_read(make_scene, tmp_path, monkeypatch) -> None:
+    result, _ = _run(make_scene, tmp_path, monkeypatch, "openai", [("object", DESC, 0), ("object", GOOD, 0)])
+    assert not result.provenance.fallback and result.intents, result.llm_error
+
+
+def test_a_429_whose_error_is_a_bare_string_is_retried(make_scene, tmp_path, monkeypatch) -> None:
+    result, server = _run(
+        make_scene, tmp_path, monkeypatch, "gemini", [("429-string", "slow down", 0), (200, DESC, 0), (200, GOOD, 0)]
+    )
+    assert not result.provenance.fallback and len(server.requests) == 3, result.llm_error
