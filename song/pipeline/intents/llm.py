@@ -135,6 +135,7 @@ class GeminiClient:
         except ImportError as exc:
             raise MissingDependencyError("google-genai", "gemini") from exc
         self.model = model
+        self.timeout_s = float(timeout_s)  # the whole request's deadline (the HTTP timeout is per read)
         self._types = types
         options = types.HttpOptions(
             timeout=int(timeout_s * 1000),
@@ -208,6 +209,7 @@ class OpenAICompatibleClient:
         self._openai = openai
         self.base_url = base_url.rstrip("/")
         self.model = model
+        self.timeout_s = float(timeout_s)  # the whole request's deadline (the HTTP timeout is per read)
         self._client = openai.OpenAI(
             base_url=self.base_url,
             api_key=os.environ.get("OPENAI_API_KEY") or "no-key",  # the SDK insists on one; servers may not
@@ -327,15 +329,42 @@ def _bounded(client, text: str) -> str:
     return text
 
 
+def _within_deadline(client, prompt: str, schema) -> str:
+    """``client.request`` with a deadline on the whole request (``client.timeout_s``, when it has one).
+
+    HTTP clients time out per read, so a server that sends a byte now and then holds a request for as
+    long as it likes; here the request runs in a daemon thread that is abandoned at the deadline.
+    """
+    deadline = getattr(client, "timeout_s", None)
+    if not deadline:
+        return client.request(prompt, schema)
+    box: dict = {}
+
+    def call() -> None:
+        try:
+            box["reply"] = client.request(prompt, schema)
+        except BaseException as exc:  # handed to the caller's thread
+            box["error"] = exc
+
+    worker = threading.Thread(target=call, daemon=True)
+    worker.start()
+    worker.join(deadline)
+    if worker.is_alive():
+        raise TransientLLMError(f"{client.provider} request timed out: no complete reply within {deadline:g} s")
+    if "error" in box:
+        raise box["error"]
+    return box["reply"]
+
+
 def _with_retries(client, prompt, schema, max_retries, backoff_s, max_concurrency, rng) -> str:
     for attempt in range(max_retries):
         try:
             with _slot(max_concurrency):
-                return _bounded(client, client.request(prompt, schema))
+                return _bounded(client, _within_deadline(client, prompt, schema))
         except TransientLLMError as exc:
             delay = backoff_s * (2**attempt) * (0.5 + rng.random())  # exponential back-off with jitter
             if exc.retry_after_s is not None:  # the server said when to come back
                 delay = max(delay, min(exc.retry_after_s, MAX_RETRY_AFTER_S))
             time.sleep(delay)
     with _slot(max_concurrency):
-        return _bounded(client, client.request(prompt, schema))  # the last try: its error goes to the caller
+        return _bounded(client, _within_deadline(client, prompt, schema))  # the last try: its error goes up

@@ -12,7 +12,8 @@ the connection), ``"redirect"`` (302 to the URL in ``text``) or ``"refuse"`` (a 
 the services answer a safety block: Gemini's ``promptFeedback.blockReason`` — or, with ``text`` =
 ``"candidate"``, a candidate stopped with ``finishReason: SAFETY`` — and OpenAI's ``message.refusal``,
 or with ``text`` = ``"content_filter"``, that finish reason), ``"object"`` (the reply's JSON object as the
-message content itself, not its text) or ``"429-string"`` (a 429 whose ``error`` is a bare string).
+message content itself, not its text), ``"429-string"`` (a 429 whose ``error`` is a bare string) or
+``"drip"`` (a slow-loris reply: one byte every ``delay_s``, each read on time).
 ``requests`` records what arrived.
 """
 
@@ -61,7 +62,8 @@ class FakeServer:
                 body = json.loads(self.rfile.read(length))
                 outer.requests.append({"path": self.path, "headers": dict(self.headers), "body": body})
                 status, text, delay = outer.script.pop(0) if outer.script else (500, "", 0.0)
-                time.sleep(delay)
+                if status != "drip":  # a drip's delay is between its bytes
+                    time.sleep(delay)
                 if status == "close":  # the server goes away mid-request
                     self.close_connection = True
                     self.connection.shutdown(2)
@@ -72,6 +74,9 @@ class FakeServer:
                 if status == "object":  # a server that sends the JSON object itself as the message content
                     payload = {"choices": [{"index": 0, "message": {"role": "assistant", "content": json.loads(text)}}]}
                     self._send(200, json.dumps(payload).encode(), {"Content-Type": "application/json"})
+                    return
+                if status == "drip":  # a slow-loris server: the reply one byte at a time, each in time
+                    self._drip(text, delay)
                     return
                 if status == "429-string":  # a rate limit whose error is a bare string
                     self._send(429, json.dumps({"error": text}).encode(), {"Content-Type": "application/json"})
@@ -84,6 +89,28 @@ class FakeServer:
                     if bad:
                         status, text = 400, f'Invalid JSON payload received. Unknown name "{bad[0].split(".")[-1]}"'
                 self._reply(status, text)
+
+            def _drip(self, text: str, every_s: float) -> None:
+                if outer.kind == "gemini":
+                    payload = {
+                        "candidates": [
+                            {"content": {"role": "model", "parts": [{"text": text}]}, "finishReason": "STOP"}
+                        ]
+                    }
+                else:
+                    payload = {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
+                data = json.dumps(payload).encode()
+                try:
+                    self.send_response(200)
+                    self.send_header("Content-Type", "application/json")
+                    self.send_header("Content-Length", str(len(data)))
+                    self.end_headers()
+                    for i in range(len(data)):
+                        self.wfile.write(data[i : i + 1])
+                        self.wfile.flush()
+                        time.sleep(every_s)
+                except (BrokenPipeError, ConnectionResetError):
+                    pass
 
             def _refusal(self, how: str) -> dict:
                 if outer.kind == "gemini":

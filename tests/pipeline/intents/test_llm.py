@@ -221,3 +221,14 @@ def test_a_429_whose_error_is_a_bare_string_is_retried(make_scene, tmp_path, mon
         make_scene, tmp_path, monkeypatch, "gemini", [("429-string", "slow down", 0), (200, DESC, 0), (200, GOOD, 0)]
     )
     assert not result.provenance.fallback and len(server.requests) == 3, result.llm_error
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_a_slow_loris_server_cannot_hold_a_request_past_its_deadline(make_scene, tmp_path, monkeypatch, kind) -> None:
+    import time
+
+    started = time.perf_counter()
+    script = [("drip", DESC, 0.2)] * 2  # ~100 bytes at 0.2 s: 20 s of reads, each well within the timeout
+    result, _ = _run(make_scene, tmp_path, monkeypatch, kind, script, max_retries=1, timeout_s=1.0)
+    assert time.perf_counter() - started < 8.0
+    assert result.provenance.fallback and "no complete reply within 1 s" in result.llm_error, result.llm_error
