@@ -278,3 +278,47 @@ def test_a_second_writer_is_refused_and_a_foreign_folder_is_never_a_run(tmp_path
     result = CliRunner().invoke(app, ["synth", "--scenes", str(tmp_path / "scenes"), "--out", str(foreign)])
     assert result.exit_code != 0 and "not a song run" in " ".join(result.output.split())
     assert sorted(p.name for p in foreign.iterdir()) == ["todo.txt"]
+
+
+POLICIES = {
+    "syntax": ("class P:\n    def reset(self, episode)\n", "my.py:2:", "expected"),
+    "init": ("class P:\n    def __init__(self):\n        raise RuntimeError('no GPU')\n", "cannot create policy", "no GPU"),
+    "sensors": ("class P:\n    sensors = 5\n    def reset(self, e): pass\n    def act(self, o): return (0, 0)\n",
+                "sensors must be a tuple", ""),
+    "array": ("class Bad:\n    def __array__(self, *a, **k):\n        raise RuntimeError('boom')\n"
+              "class P:\n    def reset(self, e): pass\n    def act(self, o): return Bad()\n", "", ""),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(POLICIES))
+def test_a_broken_policy_is_one_line_never_a_traceback(tmp_path: Path, case: str) -> None:
+    source, said, detail = POLICIES[case]
+    path = tmp_path / "my.py"
+    path.write_text(source)
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(
+        app, ["eval", "--bench", str(GOLDEN), "--policy", f"{path}:P", "--limit", "1", "--out", str(out)]
+    )
+    text = " ".join(result.output.split())
+    assert "Traceback" not in text and not isinstance(result.exception, (AttributeError, TypeError, RuntimeError))
+    if case == "array":  # a malformed command fails its episode, the run goes on and says so
+        assert result.exit_code == 0, text
+        assert json.loads(next(out.glob("*.json")).read_text())["metrics"]["all"]["ERR"] == 100.0
+    else:
+        assert result.exit_code != 0 and said in text and detail in text, text
+
+
+@pytest.mark.parametrize(("value", "said"), [("²x²", "expected WIDTHxHEIGHT"), ("99999999999999999999x1", "1-8192")])
+def test_impossible_image_sizes_are_one_line(tmp_path: Path, value: str, said: str) -> None:
+    result = CliRunner().invoke(app, ["eval", "--bench", str(GOLDEN), "--policy", "depth", "--resolution", value,
+                                      "--out", str(tmp_path / "e")])  # fmt: skip
+    assert result.exit_code != 0 and said in " ".join(result.output.split()), result.output
+    assert isinstance(result.exception, SystemExit)  # a clean exit, not an error escaping
+
+
+def test_an_infinite_step_timeout_means_no_limit(tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(app, ["eval", "--bench", str(GOLDEN), "--policy", "astar", "--limit", "2",
+                                      "--step-timeout", "inf", "--out", str(out)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "astar.json").read_text())["metrics"]["all"]["ERR"] == 0.0

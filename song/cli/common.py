@@ -125,9 +125,16 @@ def eval_results(path: Path, suffix: str) -> Path:
     return candidate
 
 
+MAX_IMAGE_SIDE = 8192  # px: a camera image larger than this is a typing error, not a camera
+
+
 def parse_size(text: str, option: str) -> tuple[int, int]:
-    """``"320x240"`` → ``(320, 240)``; a clear error naming ``option`` otherwise."""
+    """``"320x240"`` → ``(320, 240)``; a clear error naming ``option`` otherwise (ASCII digits only)."""
     width, sep, height = text.lower().partition("x")
-    if not sep or not width.isdigit() or not height.isdigit() or int(width) < 1 or int(height) < 1:
+    digits = set("0123456789")
+    if not sep or not width or not height or not set(width) <= digits or not set(height) <= digits:
         raise SongError(f"{option} {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 320x240")
-    return int(width), int(height)
+    w, h = int(width), int(height)
+    if not (1 <= w <= MAX_IMAGE_SIDE and 1 <= h <= MAX_IMAGE_SIDE):
+        raise SongError(f"{option} {text!r}: each side must be 1-{MAX_IMAGE_SIDE} pixels")
+    return w, h

@@ -82,7 +82,7 @@ class _Timeout(BaseException):
 
 @contextmanager
 def _time_limit(seconds: float | None):
-    if not seconds or threading.current_thread() is not threading.main_thread():
+    if not seconds or not math.isfinite(seconds) or threading.current_thread() is not threading.main_thread():
         yield
         return
 
@@ -115,7 +115,7 @@ def as_command(action: Any) -> tuple[float, float]:
     """A policy's return value as a finite (v, ω), or :class:`PolicyFailure` saying what it was."""
     try:
         values = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
+    except Exception:  # a policy's object whose __array__ or __float__ raises: its fault, one line
         values = None
     if values is None or values.shape != (2,) or not all(math.isfinite(v) for v in values):
         shown = repr(action)[:80]

@@ -59,6 +59,14 @@ def policy_sensors(policy: object) -> tuple[str, ...]:
     """
     declared = getattr(policy, "sensors", None)
     if declared:
+        if (
+            isinstance(declared, str)
+            or not isinstance(declared, (list, tuple))
+            or not all(isinstance(name, str) for name in declared)
+        ):
+            raise SongError(
+                f"policy {type(policy).__name__}: sensors must be a tuple of sensor names, not {declared!r}"
+            )
         return tuple(declared)
     return (*DEFAULT_SENSORS, "pedestrians") if getattr(policy, "privileged", False) else DEFAULT_SENSORS
 
