@@ -86,7 +86,7 @@ def status_table(title: str, rows: list[dict[str, Any]], columns: list[str]) -> 
     for row in rows:
         cells = []
         for column in columns:
-            value = str(row.get(column, ""))
+            value = escape(str(row.get(column, "")))  # ids and messages from input files may hold [brackets]
             if column == "status":
                 value = f"[{colours.get(value, 'white')}]{value}[/]"
             cells.append(value)

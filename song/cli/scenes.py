@@ -75,7 +75,7 @@ def check(folder: Path = typer.Argument(..., help="a scene package, or a folder 
     for name, message in problems:  # whole, unwrapped lines: easy to grep and copy
         console.print(f"[red]FAILED[/red] {escape(name)}: {escape(message)}", soft_wrap=True)
     for name, message in warnings:
-        console.print(f"[yellow]warning[/yellow] {name}: {message}", soft_wrap=True)
+        console.print(f"[yellow]warning[/yellow] {escape(name)}: {escape(message)}", soft_wrap=True)
     failed = len({name for name, _ in problems})
     console.print(f"{len(rows) - failed} ok, {failed} failed" if rows else f"no scene packages found in {folder}")
     if failed or not rows:

@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from song.datasets.limits import limits
 from song.datasets.scenes.dressing import DressingHints, Opening
 from song.datasets.scenes.materials import procthor_floor_material
 from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
@@ -62,6 +63,7 @@ from song.errors import SceneError, SongError
 FLOOR_OBJECT_MAX_BOTTOM_M = 0.15
 MIN_FOOTPRINT_M = 0.05  # floor objects smaller than one grid cell (candles, eggs) cannot be drawn on the map
 MARGIN_M = 0.3
+MAX_COORD_M = 1.0e5  # a house coordinate beyond 100 km is a broken file
 CATEGORIES = {
     "Television": "appliance",
     "FloorLamp": "decor",
@@ -310,8 +312,14 @@ def convert_house(
     if not rooms:
         raise SceneError(where, "rooms", "house has no rooms")
     allpts = np.vstack(list(rooms.values()))
+    if not np.isfinite(allpts).all() or np.abs(allpts).max() > MAX_COORD_M:
+        raise SceneError(where, "rooms", f"floor polygon coordinates must be finite and within ±{MAX_COORD_M:g} m")
     lo = np.floor((allpts.min(axis=0) - MARGIN_M) / resolution) * resolution
     hi = np.ceil((allpts.max(axis=0) + MARGIN_M) / resolution) * resolution
+    cells = int(np.prod(np.round((hi - lo) / resolution)))
+    if cells > limits().max_image_pixels:  # refused before any grid is allocated
+        size = "x".join(f"{v:.0f}" for v in hi - lo)
+        raise SceneError(where, "rooms", f"a {size} m house is {cells:,} cells at {resolution} m (max_image_pixels)")
     raster = Rasterizer(tuple(lo), tuple(hi), resolution, fill=0)
     for poly in rooms.values():
         raster.polygon(poly, 255)

@@ -202,3 +202,37 @@ def test_scenes_check_finds_every_object_the_house_makes_reachable(tmp_path: Pat
         assert "cannot be reached" not in result.output, result.output
     else:  # walled off, the kitchen's only door is to the outside: its objects are cut off, as the JSON says
         assert "cannot be reached" in result.output and "fridge_1" in result.output
+
+
+@pytest.mark.parametrize(("scale", "said"), [(1e306, "finite and within"), (200.0, "max_image_pixels")])
+def test_an_absurd_house_is_refused_before_any_grid_is_allocated(tmp_path: Path, scale: float, said: str) -> None:
+    from tests.datasets.scenes.procthor_factory import ASSETS, open_plan_house
+
+    house = open_plan_house()
+    for room in house["rooms"]:
+        for p in room["floorPolygon"]:
+            p["x"], p["z"] = p["x"] * scale, p["z"] * scale
+    (tmp_path / "houses").mkdir()
+    (tmp_path / "houses" / "huge.json").write_text(json.dumps(house))
+    table = tmp_path / "assets.json"
+    table.write_text(
+        json.dumps(
+            {k: {"objectType": t, "boundingBox": dict(zip("xyz", s, strict=True))} for k, (t, s) in ASSETS.items()}
+        )
+    )
+    (result,) = import_procthor(tmp_path / "houses" / "huge.json", tmp_path / "scenes", assets=table, splat=False)
+    assert result.path is None and said in result.error and "rooms" in result.error
+    assert not (tmp_path / "scenes").exists() or not any((tmp_path / "scenes").iterdir())
+
+
+def test_scenes_check_prints_bracketed_ids_and_messages_as_they_are(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    root = _import_own(tmp_path)
+    data = json.loads((root / "semantic_map.json").read_text())
+    data["venue_type"] = "home[/]"
+    (root / "semantic_map.json").write_text(json.dumps(data))
+    result = CliRunner().invoke(app, ["scenes", "check", str(root)])
+    assert "MarkupError" not in repr(result.exception) and "home[/]" in result.output, result.output
