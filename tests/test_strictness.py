@@ -322,3 +322,29 @@ def test_an_infinite_step_timeout_means_no_limit(tmp_path: Path) -> None:
                                       "--step-timeout", "inf", "--out", str(out)])  # fmt: skip
     assert result.exit_code == 0, result.output
     assert json.loads((out / "astar.json").read_text())["metrics"]["all"]["ERR"] == 0.0
+
+
+@pytest.mark.parametrize("how", ["missing", "mistyped"])
+def test_a_release_table_with_a_missing_or_mistyped_column_is_one_line(tmp_path: Path, how: str) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    release = tmp_path / "bench"
+    shutil.copytree(GOLDEN / "1.0.0", release)
+    path = next((release / "data" / "episodes").glob("*.parquet"))
+    table = pq.read_table(path)
+    index = table.schema.get_field_index("goal_radius")
+    if how == "missing":
+        table = table.remove_column(index)
+    else:
+        table = table.set_column(
+            index, "goal_radius", pa.array([str(v) for v in table.column("goal_radius").to_pylist()])
+        )
+    pq.write_table(table, path)
+    _reseal(release)  # consistent with its fingerprint: only the column is wrong
+    result = CliRunner().invoke(
+        app, ["eval", "--bench", str(release), "--policy", "astar", "--out", str(tmp_path / "e")]
+    )
+    text = " ".join(result.output.split())
+    assert result.exit_code != 0 and "column 'goal_radius'" in text and "part-00000.parquet" in text, text
+    assert isinstance(result.exception, SystemExit)

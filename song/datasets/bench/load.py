@@ -13,6 +13,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
@@ -26,14 +27,18 @@ from song.datasets.bench.info import (
     version_key,
 )
 from song.datasets.bench.schema import (
+    AVATARS,
     AVATARS_PATH,
     DIFFICULTIES,
+    EPISODES,
     EPISODES_PATH,
     INFO_FINGERPRINT_SINCE,
     INFO_PATH,
     MANIFEST_PATH,
     META_SCHEMA_VERSION,
+    PEDESTRIANS,
     PEDESTRIANS_PATH,
+    SCENES,
     SCENES_PATH,
 )
 from song.datasets.bench.types import AvatarBinding, Episode, PedestrianTrack, RuntimeParams, StaticMap
@@ -42,6 +47,9 @@ from song.errors import BenchmarkError
 from song.util import sha256_file
 
 BLOB_ADDRESS = re.compile(r"blobs/sha256/([0-9a-f]{2})/([0-9a-f]{64})(\.[A-Za-z0-9]{1,8}){0,2}")
+
+
+OPTIONAL_COLUMNS = frozenset({"split", "reference_ped_id", "encounter_time"})  # added in schema 1.3
 
 
 class Benchmark:
@@ -58,10 +66,10 @@ class Benchmark:
         self._verified: set[Path] = set()
         self.info: Info = read_info(self._inside(INFO_PATH, "release info"))
         self.params: RuntimeParams = runtime_params(self.info, root / INFO_PATH)
-        self.episodes_table = self._read(EPISODES_PATH.format(part=0))
-        self.scenes_table = self._read(SCENES_PATH)
-        self.pedestrians_table = self._read(PEDESTRIANS_PATH.format(part=0))
-        self.avatars_table = self._read(AVATARS_PATH.format(part=0))
+        self.episodes_table = self._read(EPISODES_PATH.format(part=0), EPISODES)
+        self.scenes_table = self._read(SCENES_PATH, SCENES)
+        self.pedestrians_table = self._read(PEDESTRIANS_PATH.format(part=0), PEDESTRIANS)
+        self.avatars_table = self._read(AVATARS_PATH.format(part=0), AVATARS)
         self._scenes = {row["scene_id"]: row for row in self.scenes_table.to_pylist()}
         self.static_map = lru_cache(maxsize=64)(self._static_map)
         self.pedestrians = lru_cache(maxsize=64)(self._pedestrians)
@@ -128,7 +136,11 @@ class Benchmark:
             raise BenchmarkError(f"{self.root}: {what} {rel!r} resolves outside the release ({path})")
         return path
 
-    def _read(self, rel: str):
+    def _read(self, rel: str, schema):
+        """A release table, refused (one line naming the file and column) when a column is missing or mistyped.
+
+        Columns added by later schema versions (:data:`OPTIONAL_COLUMNS`) may be absent.
+        """
         path = self._inside(rel, "table")
         try:
             rows = pq.read_metadata(path).num_rows
@@ -141,6 +153,14 @@ class Benchmark:
         if found is None:
             raise BenchmarkError(f"{path}: no schema version in the Parquet metadata; not a song release file")
         check_schema_version(found.decode(), path)
+        for field in schema:
+            if field.name not in table.column_names:
+                if field.name not in OPTIONAL_COLUMNS:
+                    raise BenchmarkError(f"{path}: column {field.name!r} is missing")
+                continue
+            found_type = table.schema.field(field.name).type
+            if found_type != field.type and not (pa.types.is_null(found_type) and field.nullable):
+                raise BenchmarkError(f"{path}: column {field.name!r} is {found_type}, expected {field.type}")
         return table
 
     def blob(self, ref: dict | None) -> Path | None:
