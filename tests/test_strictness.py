@@ -348,3 +348,51 @@ def test_a_release_table_with_a_missing_or_mistyped_column_is_one_line(tmp_path:
     text = " ".join(result.output.split())
     assert result.exit_code != 0 and "column 'goal_radius'" in text and "part-00000.parquet" in text, text
     assert isinstance(result.exception, SystemExit)
+
+
+SNOOP = """
+import gc
+
+
+class Snoop:
+    sensors = ("state",)
+
+    def reset(self, episode):
+        pass
+
+    def act(self, observation):
+        # an in-process policy can find the runner's own episode, pedestrians' futures and all
+        seen = any(getattr(o, "pedestrians", None) for o in gc.get_objects() if type(o).__name__ == "Episode")
+        return (float("nan"), 0.0) if seen else (0.3, 0.0)
+
+
+class Stuck:
+    def reset(self, episode):
+        pass
+
+    def act(self, observation):
+        return (sum(range(10**13)), 0.0)  # a loop inside C: no signal handler runs until it ends
+"""
+
+
+def test_an_isolated_policy_cannot_reach_the_runner_and_is_stopped_when_stuck(tmp_path: Path) -> None:
+    import time
+
+    path = tmp_path / "hostile.py"
+    path.write_text(SNOOP)
+    runs = {}
+    for mode in ("in-process", "isolated"):
+        out = tmp_path / mode
+        args = ["eval", "--bench", str(GOLDEN), "--policy", f"{path}:Snoop", "--limit", "2", "--out", str(out)]
+        result = CliRunner().invoke(app, args + (["--isolate"] if mode == "isolated" else []))
+        assert result.exit_code == 0, result.output
+        runs[mode] = json.loads(next(out.glob("*.json")).read_text())
+    assert runs["in-process"]["metrics"]["all"]["ERR"] == 100.0  # it found the pedestrians in memory
+    assert runs["isolated"]["metrics"]["all"]["ERR"] == 0.0 and runs["isolated"]["policy_process"] == "isolated"
+    started = time.perf_counter()
+    out = tmp_path / "stuck"
+    result = CliRunner().invoke(app, ["eval", "--bench", str(GOLDEN), "--policy", f"{path}:Stuck", "--limit", "2",
+                                      "--isolate", "--step-timeout", "0.5", "--out", str(out)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert time.perf_counter() - started < 30.0
+    assert json.loads(next(out.glob("*.json")).read_text())["metrics"]["all"]["ERR"] == 100.0

@@ -59,6 +59,9 @@ def eval_command(
     allow_modified: bool = typer.Option(
         False, "--allow-modified", help="run on a release edited since export (results marked unofficial)"
     ),
+    isolate: bool = typer.Option(
+        False, "--isolate", help="run the policy in a process of its own (for leaderboard-style results)"
+    ),
 ) -> None:
     """Run policies on every episode; write per-episode Parquet and the paper's metric table.
 
@@ -89,7 +92,7 @@ def eval_command(
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:
-        setup = make_setup(release, name, sensors, params, changed, camera, step_timeout, allow_modified)
+        setup = make_setup(release, name, sensors, params, changed, camera, step_timeout, allow_modified, isolate)
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:

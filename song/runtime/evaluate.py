@@ -25,6 +25,7 @@ from song.datasets.bench.types import RuntimeParams
 from song.parallel import parallel_map
 from song.runtime.avatars import make_collider
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
+from song.runtime.isolate import IsolatedPolicy
 from song.runtime.loop import EpisodeResult, run_episode
 from song.runtime.metrics import aggregate, markdown_table
 from song.runtime.policies import load_policy, policy_sensors
@@ -66,6 +67,7 @@ class EvalSetup:
         overrides: ``{"robot.max_speed_mps": [release value, used value], ...}``; empty for official runs.
         sensor_options: per-sensor keyword options.
         step_timeout_s: the longest one ``reset``/``act`` call may take before its episode fails.
+        isolate: run the policy in a process of its own (:mod:`song.runtime.isolate`).
     """
 
     policy: str
@@ -74,6 +76,7 @@ class EvalSetup:
     overrides: dict[str, list[Any]] = field(default_factory=dict)
     sensor_options: dict[str, dict] = field(default_factory=dict)
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S
+    isolate: bool = False
 
 
 def make_setup(
@@ -85,6 +88,7 @@ def make_setup(
     camera: dict[str, Any] | None = None,
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
     allow_modified: bool = False,
+    isolate: bool = False,
 ) -> EvalSetup:
     """The setup of one policy; a release that no longer matches its fingerprint is refused first.
 
@@ -97,13 +101,19 @@ def make_setup(
         camera: options shared by the camera sensors: ``width``, ``height``, ``backend``.
         step_timeout_s: per-call time limit of the policy (its episode fails past it).
         allow_modified: run on a release that fails :attr:`Benchmark.integrity` (results unofficial).
+        isolate: run the policy in a process of its own; its code never runs in this one.
     """
     bench.require_intact(allow_modified)
-    names = parse_sensor_names([*policy_sensors(load_policy(policy)), *parse_sensor_names(sensors or [])])
+    if isolate:  # the policy's code (its module too) runs only in its own process
+        probe = IsolatedPolicy(policy, step_timeout_s)
+        declared, _ = probe.sensors, probe.close()
+    else:
+        declared = policy_sensors(load_policy(policy))
+    names = parse_sensor_names([*declared, *parse_sensor_names(sensors or [])])
     options = {"camera": dict(camera)} if camera else {}
     plugins.check_name("render_backend", options.get("camera", {}).get("backend", "auto"), extra=("auto",))
     plugins.check_name("camera_model", options.get("camera", {}).get("model", "ideal"))
-    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options, step_timeout_s)
+    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options, step_timeout_s, isolate)
 
 
 @dataclass(frozen=True)
@@ -121,9 +131,23 @@ def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  
     bench = cache[job.bench]
     setup = job.setup
     episode = dataclasses.replace(bench.episode(job.episode_id), params=setup.params)
-    policy = load_policy(setup.policy)  # first: its module may register the sensors it declares
+    if setup.isolate:  # the child enforces the step limit itself (and is killed past it)
+        policy, limit = _isolated(setup), None
+    else:
+        policy, limit = load_policy(setup.policy), setup.step_timeout_s  # first: it may register its sensors
     sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
-    return run_episode(episode, policy, make_collider(episode), sensors, step_timeout_s=setup.step_timeout_s)
+    return run_episode(episode, policy, make_collider(episode), sensors, step_timeout_s=limit)
+
+
+_ISOLATED: dict[tuple[str, float], IsolatedPolicy] = {}
+
+
+def _isolated(setup: EvalSetup) -> IsolatedPolicy:
+    """This worker's child process for the policy (kept across episodes; restarted after a kill)."""
+    key = (setup.policy, setup.step_timeout_s)
+    if key not in _ISOLATED:
+        _ISOLATED[key] = IsolatedPolicy(setup.policy, setup.step_timeout_s)
+    return _ISOLATED[key]
 
 
 def iter_eval(
@@ -195,6 +219,7 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
         "official": not setup.overrides and not bench.integrity,
         "release_check": bench.integrity or "ok",  # the fingerprint, info.json and the tables, checked at open
         "step_timeout_s": setup.step_timeout_s,
+        "policy_process": "isolated" if setup.isolate else "in-process",
     }
 
 
