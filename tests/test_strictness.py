@@ -396,3 +396,17 @@ def test_an_isolated_policy_cannot_reach_the_runner_and_is_stopped_when_stuck(tm
     assert result.exit_code == 0, result.output
     assert time.perf_counter() - started < 30.0
     assert json.loads(next(out.glob("*.json")).read_text())["metrics"]["all"]["ERR"] == 100.0
+
+
+def test_a_killed_collect_leaves_no_truncated_dataset_and_the_next_one_completes(tmp_path: Path) -> None:
+    from song.runtime.collect import PARTIAL_DIR, collect
+
+    out = tmp_path / "dataset"
+    leftover = out / PARTIAL_DIR / "data" / "chunk-000"
+    leftover.mkdir(parents=True)
+    (leftover / "episode_000000.parquet").write_bytes(b"PAR1 truncated")  # what a kill mid-write leaves
+    summary = collect(str(GOLDEN), "straight", out, split="test", limit=2, keep="all")
+    assert summary.episodes == 2 and not (out / PARTIAL_DIR).exists()
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["data", "meta"]
+    info = json.loads((out / "meta" / "info.json").read_text())
+    assert info["total_episodes"] == 2

@@ -22,6 +22,10 @@ and their sum, and the done flags. By default only successful rollouts are writt
 what behaviour cloning wants); ``keep="all"`` writes every one (``next.success`` tells them apart).
 Episodes roll out in parallel worker processes and are written in release order.
 
+Atomic per dataset: everything is written under ``DS/.partial/`` and moved into place when whole
+(``meta/`` last), so a collect killed midway leaves no truncated dataset, only ``.partial``, which the
+next collect into the same folder removes. One collect at a time writes a folder (a lock).
+
 Deterministic: the same release, policy and options give byte-identical files whatever the worker
 count (x264 runs single-threaded). Checked against the layout as LeRobot documents it (the ``lerobot``
 package itself pulls a large dependency tree that is not installed here).
@@ -31,6 +35,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,6 +56,7 @@ from song.util import folder_lock, write_json_atomic, write_text_atomic
 CODEBASE_VERSION = "v2.1"
 CHUNK_SIZE = 1000
 LOCK_FILE = ".song.lock"  # held while a collect writes the dataset folder
+PARTIAL_DIR = ".partial"  # the dataset is written here and moved into place when whole
 TASK = "navigate to the goal among pedestrians"
 DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
 VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
@@ -301,7 +308,7 @@ def collect(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SongError(f"{out}: a file; collect writes a dataset folder (choose another --out)")
-    if out.is_dir() and any(p.name != LOCK_FILE for p in out.iterdir()):
+    if out.is_dir() and any(p.name not in (LOCK_FILE, PARTIAL_DIR) for p in out.iterdir()):
         raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
     bench = open_benchmark(bench_path)
     bench.require_intact(allow_modified)
@@ -311,8 +318,10 @@ def collect(
     load_policy(policy_name)  # an unknown policy fails here, before anything is written
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out / LOCK_FILE, "dataset folder"):  # a second collect into --out stops at once
-        if any(p.name != LOCK_FILE for p in out.iterdir()):  # checked again under the lock
+        if any(p.name not in (LOCK_FILE, PARTIAL_DIR) for p in out.iterdir()):  # checked again under the lock
             raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
+        partial = out / PARTIAL_DIR  # what a killed collect left (we hold the lock: nobody is writing it)
+        shutil.rmtree(partial, ignore_errors=True)
         fps = float(bench.params.robot.control_hz)
         jobs = [
             CollectJob(str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s)
@@ -321,12 +330,16 @@ def collect(
         done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
         rollouts = [done[e.episode_id] for e in episodes]  # in release order, whatever the workers
         kept = [r for r in rollouts if r["steps"] and (keep == "all" or r["outcome"] == "success")]
-        written = _write_episodes(out, kept, fps)
+        written = _write_episodes(partial, kept, fps)
         successes = sum(r["outcome"] == "success" for r in rollouts)
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
                  "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
                  "release_check": bench.integrity or "ok"}  # fmt: skip
-        _write_meta(out, kept, written, fps, split, about)
+        _write_meta(partial, kept, written, fps, split, about)
+        for name in ("data", "videos", "meta"):  # the dataset appears complete, meta (its index) last
+            if (partial / name).exists():
+                os.replace(partial / name, out / name)
+        partial.rmdir()
         return CollectSummary(out, len(kept), written["frames"], successes, len(rollouts))
 
 
