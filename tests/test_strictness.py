@@ -410,3 +410,19 @@ def test_a_killed_collect_leaves_no_truncated_dataset_and_the_next_one_completes
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["data", "meta"]
     info = json.loads((out / "meta" / "info.json").read_text())
     assert info["total_episodes"] == 2
+
+
+def test_a_ply_with_nan_colours_is_refused_in_one_line(tmp_path: Path) -> None:
+    from song.datasets.scenes.ply import GaussianCloud, read_gaussian_ply, write_standard_ply
+    from song.errors import FormatError
+
+    n = 100
+    cloud = GaussianCloud(
+        means=np.zeros((n, 3), np.float32), quats=np.tile(np.float32([1, 0, 0, 0]), (n, 1)),
+        log_scales=np.full((n, 3), -3, np.float32), opacity_logits=np.zeros(n, np.float32),
+        sh_dc=np.zeros((n, 3), np.float32),
+    )  # fmt: skip
+    cloud.sh_dc[:95, 1] = np.nan
+    write_standard_ply(tmp_path / "nan.ply", cloud)
+    with pytest.raises(FormatError, match=r"nan.ply: vertex colour \(f_dc\): 95 of 100 splats hold NaN or inf"):
+        read_gaussian_ply(tmp_path / "nan.ply")

@@ -201,9 +201,27 @@ def read_gaussian_ply(path: str | Path) -> GaussianCloud:
     ply = _open(path)
     compressed = _check(ply, path)
     try:
-        return _read_compressed(ply, path) if compressed else _read_standard(ply["vertex"], path)
+        cloud = _read_compressed(ply, path) if compressed else _read_standard(ply["vertex"], path)
     except (ValueError, IndexError) as exc:  # truncated bodies surface here in plyfile's lazy reads
         raise FormatError(path, "vertex", f"truncated or malformed data ({exc})") from exc
+    _check_finite(cloud, path)
+    return cloud
+
+
+def _check_finite(cloud: GaussianCloud, path: Path) -> None:
+    """Refuse splats holding NaN or inf (one NaN colour blackens whatever it covers in every render).
+
+    Raises:
+        FormatError: naming the field and how many splats hold a non-finite value.
+    """
+    fields = {"position": cloud.means, "rotation": cloud.quats, "scale": cloud.log_scales,
+              "opacity": cloud.opacity_logits, "colour (f_dc)": cloud.sh_dc}  # fmt: skip
+    if cloud.sh_rest is not None:
+        fields["colour (f_rest)"] = cloud.sh_rest
+    for name, values in fields.items():
+        bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1) if len(values) else np.zeros(0, bool)
+        if bad.any():
+            raise FormatError(path, f"vertex {name}", f"{int(bad.sum()):,} of {len(values):,} splats hold NaN or inf")
 
 
 def _read_standard(vertex, path: Path) -> GaussianCloud:
