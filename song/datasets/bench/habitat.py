@@ -31,6 +31,7 @@ import numpy as np
 from song.datasets.bench.load import Benchmark
 from song.datasets.bench.types import StaticMap
 from song.datasets.scenes.usd import ProxyBox, ProxyMesh, box_mesh
+from song.errors import BenchmarkError
 from song.util import check_id, write_bytes_atomic
 
 SCENES_DIR = "scenes"
@@ -159,9 +160,26 @@ def _write_gzip_json(path: Path, payload: object) -> None:
     write_bytes_atomic(path, buffer.getvalue())
 
 
+def _check_finite(row: dict) -> None:
+    """Refuse an episode whose numbers Habitat's JSON cannot hold (NaN, inf), naming it and the field."""
+    for field in (
+        "start_position",
+        "goal_position",
+        "start_yaw",
+        "goal_radius",
+        "geodesic_distance",
+        "optimal_time",
+        "t0",
+    ):
+        values = np.asarray(row.get(field), dtype=np.float64)
+        if values.size == 0 or not np.isfinite(values).all():
+            raise BenchmarkError(f"episode {row.get('episode_id')!r}: {field} is not finite ({row.get(field)!r})")
+
+
 def _write_habitat(bench: Benchmark, rows: list[dict], out: Path) -> Path:
     episodes = []
     for row in rows:
+        _check_finite(row)
         start = to_habitat_point(np.asarray(row["start_position"]))
         goal = to_habitat_point(np.asarray(row["goal_position"]))
         episodes.append(

@@ -356,3 +356,15 @@ def test_collect_writes_a_lerobot_dataset_from_the_training_split(graded_run, tm
     assert [k["song_episode_id"] for k in kept] == [e["song_episode_id"] for e in episodes if e["outcome"] == "success"]
     again = CliRunner().invoke(app, ["collect", "--bench", str(release), "--out", str(out)])
     assert again.exit_code != 0 and "not empty" in again.output
+
+
+def test_habitat_export_refuses_an_episode_it_cannot_write(graded_run, tmp_path: Path) -> None:
+    from song.datasets.bench.habitat import _write_habitat
+    from song.errors import BenchmarkError
+
+    release = bench.open(export_bench(graded_run(), tmp_path / "bench", "1.0.0").path)
+    rows = release.episodes_table.to_pylist()
+    rows[0]["geodesic_distance"] = float("nan")
+    with pytest.raises(BenchmarkError, match=rf"episode '{rows[0]['episode_id']}': geodesic_distance is not finite"):
+        _write_habitat(release, rows, tmp_path / "hab.json.gz")
+    assert not (tmp_path / "hab.json.gz").exists()
