@@ -426,3 +426,23 @@ def test_a_ply_with_nan_colours_is_refused_in_one_line(tmp_path: Path) -> None:
     write_standard_ply(tmp_path / "nan.ply", cloud)
     with pytest.raises(FormatError, match=r"nan.ply: vertex colour \(f_dc\): 95 of 100 splats hold NaN or inf"):
         read_gaussian_ply(tmp_path / "nan.ply")
+
+
+def test_a_small_table_declaring_a_huge_decoded_size_is_refused_before_reading(tmp_path: Path, monkeypatch) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from song.datasets.bench import open_benchmark
+    from song.errors import SongError
+
+    release = tmp_path / "bench"
+    shutil.copytree(GOLDEN / "1.0.0", release)
+    path = next((release / "data" / "episodes").glob("*.parquet"))
+    table = pq.read_table(path)
+    index = table.schema.get_field_index("config_sha256")
+    bomb = ["x" * (64 * 2**20)] + table.column("config_sha256").to_pylist()[1:]  # 64 MiB of one letter
+    pq.write_table(table.set_column(index, "config_sha256", pa.array(bomb)), path, compression="zstd")
+    assert path.stat().st_size < 2**20  # the file itself is small
+    monkeypatch.setenv("SONG_MAX_ARRAY_BYTES", str(32 * 2**20))
+    with pytest.raises(SongError, match="decoded size .* exceeds the limit max_array_bytes"):
+        open_benchmark(release)

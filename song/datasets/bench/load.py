@@ -143,9 +143,12 @@ class Benchmark:
         """
         path = self._inside(rel, "table")
         try:
-            rows = pq.read_metadata(path).num_rows
-            if rows > limits().max_table_rows:
-                raise over(path, "", "row count", rows, "max_table_rows")
+            meta = pq.read_metadata(path)
+            if meta.num_rows > limits().max_table_rows:
+                raise over(path, "", "row count", meta.num_rows, "max_table_rows")
+            decoded = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+            if decoded > limits().max_array_bytes:  # a tiny file can declare a huge decoded table
+                raise over(path, "", "decoded size (bytes)", decoded, "max_array_bytes")
             table = pq.read_table(path)
         except (OSError, ValueError) as exc:
             raise BenchmarkError(f"{path}: cannot read table: {exc}") from exc
