@@ -73,16 +73,22 @@ def test_a_nan_action_ends_the_env_episode_as_error_like_song_eval() -> None:
     assert info["outcome"] == "error" and "two finite numbers" in info["error"]
 
 
-def test_one_writer_per_run_folder(tmp_path: Path) -> None:
-    lock = tmp_path / "run" / ".song.lock"
-    lock.parent.mkdir(parents=True)
+def _hold(lock: Path) -> subprocess.Popen:
+    """Another process holding ``lock`` (flock), as a second writer would; returns once it holds it."""
     holder = subprocess.Popen(
         [sys.executable, "-c", f"import fcntl, time; f = open({str(lock)!r}, 'a+b'); "
          "fcntl.flock(f.fileno(), fcntl.LOCK_EX); print('held', flush=True); time.sleep(30)"],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
+    assert holder.stdout.readline().strip() == "held"
+    return holder
+
+
+def test_one_writer_per_run_folder(tmp_path: Path) -> None:
+    lock = tmp_path / "run" / ".song.lock"
+    lock.parent.mkdir(parents=True)
+    holder = _hold(lock)
     try:
-        assert holder.stdout.readline().strip() == "held"
         with pytest.raises(SongError, match="another song process is writing this run folder"):
             with folder_lock(lock, "run folder"):
                 pass
@@ -251,13 +257,8 @@ def test_a_second_writer_is_refused_and_a_foreign_folder_is_never_a_run(tmp_path
     out = tmp_path / "dataset"
     out.mkdir()
     lock = out / LOCK_FILE
-    holder = subprocess.Popen(
-        [sys.executable, "-c", f"import fcntl, time; f = open({str(lock)!r}, 'a+b'); "
-         "fcntl.flock(f.fileno(), fcntl.LOCK_EX); print('held', flush=True); time.sleep(30)"],
-        stdout=subprocess.PIPE, text=True,
-    )  # fmt: skip
+    holder = _hold(lock)
     try:
-        assert holder.stdout.readline().strip() == "held"
         with pytest.raises(SongError, match="another song process is writing this dataset folder"):
             collect(str(GOLDEN), "straight", out, split="test", limit=1)
     finally:

@@ -49,6 +49,13 @@ def unknown_schema_fields(schema: object, where: str = "response_schema") -> lis
     return found
 
 
+def _success(kind: str, text: str) -> dict:
+    """A successful reply carrying ``text``, as each service sends it."""
+    if kind == "gemini":
+        return {"candidates": [{"content": {"role": "model", "parts": [{"text": text}]}, "finishReason": "STOP"}]}
+    return {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
+
+
 class FakeServer:
     """Scripted replies (see the module docstring)."""
 
@@ -91,15 +98,7 @@ class FakeServer:
                 self._reply(status, text)
 
             def _drip(self, text: str, every_s: float) -> None:
-                if outer.kind == "gemini":
-                    payload = {
-                        "candidates": [
-                            {"content": {"role": "model", "parts": [{"text": text}]}, "finishReason": "STOP"}
-                        ]
-                    }
-                else:
-                    payload = {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
-                data = json.dumps(payload).encode()
+                data = json.dumps(_success(outer.kind, text)).encode()
                 try:
                     self.send_response(200)
                     self.send_header("Content-Type", "application/json")
@@ -126,14 +125,7 @@ class FakeServer:
             def _reply(self, status: int, text: str) -> None:
                 headers = {}
                 if status == 200:
-                    if outer.kind == "gemini":
-                        payload = {
-                            "candidates": [
-                                {"content": {"role": "model", "parts": [{"text": text}]}, "finishReason": "STOP"}
-                            ]
-                        }
-                    else:
-                        payload = {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
+                    payload = _success(outer.kind, text)
                 else:
                     error = {"code": status, "message": text or "scripted failure", "status": "UNAVAILABLE"}
                     if status == 429:
