@@ -151,6 +151,11 @@ def splat_command(
         target = root
         if out is not None:
             target = out / root.name
+            links = [p.name for p in root.rglob("*") if p.is_symlink()]
+            if links:  # a link could carry any file of the machine into --out
+                rows.append({"scene": root.name, "status": "failed", "gaussians": f"symbolic link(s) in the package: "
+                             f"{', '.join(sorted(links)[:3])}; copy real files"})  # fmt: skip
+                continue
             if target.resolve() != root.resolve():
                 shutil.copytree(root, target, dirs_exist_ok=True)
         if (target / GAUSSIANS).is_file() and not force:

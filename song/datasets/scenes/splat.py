@@ -377,6 +377,21 @@ def write_proxy(root: str | Path, hints: DressingHints) -> None:
     write_usd_proxy(Path(root) / USD_PROXY, solids, surfaces, hints.to_json())
 
 
+def _check_splat_count(root: Path, package, spacing: float) -> None:
+    """Refuse a spacing that would make more surfels than ``max_splats`` (estimated before any is made).
+
+    The floor and the ceiling alone take (floor area / spacing²) surfels each: a lower bound.
+    """
+    from song.datasets.limits import limits, over
+    from song.errors import SceneError
+
+    grid = package.occupancy
+    floor_m2 = float(np.count_nonzero(grid.cells != 0)) * grid.resolution**2
+    estimate = int(2 * floor_m2 / spacing**2)
+    if estimate > limits().max_splats:
+        raise over(root, "spacing", f"{spacing} m spacing makes at least", estimate, "max_splats", SceneError)
+
+
 def dress_package(
     root: str | Path, hints: DressingHints | None = None, spacing: float = SPACING_M, seed: int | None = None
 ) -> DressResult:
@@ -398,6 +413,7 @@ def dress_package(
     hints = hints or DressingHints()
     if seed is not None:
         hints = dataclasses.replace(hints, seed=seed)
+    _check_splat_count(root, package, spacing)
     dressing = build_dressing(package.semantic_map, package.occupancy, hints)
     cloud = synthesize_gaussians(dressing, spacing)
     write_compressed_ply(root / GAUSSIANS, cloud)

@@ -221,3 +221,30 @@ def test_same_seed_same_bytes_and_a_supersplat_file(office: Path, tmp_path: Path
 def _header(path: Path) -> list[str]:
     head = path.read_bytes()[:4096]
     return [line for line in head[: head.index(b"end_header")].decode().splitlines() if not line.startswith("comment")]
+
+
+def test_a_spacing_that_would_exhaust_memory_is_refused_before_any_surfel(make_scene, monkeypatch) -> None:
+    from song.datasets.scenes.splat import dress_package
+    from song.errors import SceneError
+
+    root = make_scene()
+    with pytest.raises(SceneError, match="spacing: 0.005 m spacing makes at least .* exceeds the limit max_splats"):
+        monkeypatch.setenv("SONG_MAX_SPLATS", "1000000")
+        dress_package(root, spacing=0.005)
+    assert not (root / "3dgs_compressed.ply").exists()
+
+
+def test_splat_out_never_copies_through_a_symbolic_link(make_scene, tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from song.cli import app
+
+    root = make_scene()
+    secret = tmp_path / "secret.txt"
+    secret.write_text("not yours")
+    (root / "scene_flat.usda").unlink(missing_ok=True)
+    (root / "scene_flat.usda").symlink_to(secret)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["scenes", "splat", str(root.parent), "--out", str(out)])
+    assert result.exit_code != 0 and "symbolic link" in " ".join(result.output.split())
+    assert not any(p.is_file() and p.read_bytes() == b"not yours" for p in out.rglob("*")) if out.exists() else True
