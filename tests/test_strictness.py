@@ -447,3 +447,55 @@ def test_a_small_table_declaring_a_huge_decoded_size_is_refused_before_reading(t
     monkeypatch.setenv("SONG_MAX_ARRAY_BYTES", str(32 * 2**20))
     with pytest.raises(SongError, match="decoded size .* exceeds the limit max_array_bytes"):
         open_benchmark(release)
+
+
+def _forged_npz(path: Path, name: str, shape: tuple[int, ...], dtype: str = "<f8", payload: bytes = b"\0" * 64) -> Path:
+    import io
+    import zipfile
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": dtype, "fortran_order": False, "shape": shape})
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr(f"{name}.npy", header.getvalue() + payload)
+    return path
+
+
+def test_npz_with_a_forged_header_is_refused_before_numpy_allocates(tmp_path):
+    from song.datasets.limits import read_npz
+
+    bomb = _forged_npz(tmp_path / "motion.npz", "local_quats", (10**7, 10**5))  # 8 TB declared, 64 B present
+    with pytest.raises(SongError, match=r"motion\.npz.*local_quats.*header declares 8,000,000,000,000 bytes"):
+        read_npz(bomb)
+    with pytest.raises(SongError, match="object arrays are not accepted"):
+        read_npz(_forged_npz(tmp_path / "obj.npz", "x", (1,), dtype="|O"))
+    (tmp_path / "junk.npz").write_bytes(b"PK\x03\x04 not a zip")
+    with pytest.raises(SongError, match=r"junk\.npz.*not a readable npz"):
+        read_npz(tmp_path / "junk.npz")
+    good = tmp_path / "good.npz"
+    np.savez_compressed(good, a=np.arange(6.0).reshape(2, 3), b=np.array([1, 2], np.int32))
+    arrays = read_npz(good)
+    assert arrays["a"].shape == (2, 3) and arrays["b"].dtype == np.int32
+
+
+def test_npz_member_over_max_array_bytes_is_refused(tmp_path, monkeypatch):
+    from song.datasets.limits import read_npz
+
+    path = tmp_path / "big.npz"
+    np.savez_compressed(path, poses=np.zeros((1024, 156)))  # 1.2 MiB decoded, a few KiB on disk
+    monkeypatch.setenv("SONG_MAX_ARRAY_BYTES", str(2**20))
+    with pytest.raises(SongError, match=r"big\.npz.*poses.*uncompressed size .* exceeds the limit max_array_bytes"):
+        read_npz(path)
+
+
+def test_motion_and_navmesh_readers_refuse_a_forged_npz(tmp_path):
+    from song.pipeline.crowd.navmesh import load_navmesh
+    from song.pipeline.motion.io import load_motion
+
+    traj = tmp_path / "traj"
+    traj.mkdir()
+    _forged_npz(traj / "motion.npz", "t", (2**40,))
+    with pytest.raises(SongError, match=r"motion\.npz.*t.*header declares"):
+        load_motion(traj)
+    _forged_npz(tmp_path / "navmesh.npz", "verts", (2**30, 3))
+    with pytest.raises(SongError, match=r"navmesh\.npz.*verts.*header declares"):
+        load_navmesh(tmp_path / "navmesh.npz")

@@ -120,9 +120,45 @@ def load_json(path: str | Path, text: str | None = None, error: type[InputError]
     return data
 
 
-def check_npz_members(zip_file, path: str | Path) -> None:
-    """Refuse an ``np.load`` npz whose members would decode to more than ``max_array_bytes`` each."""
+def read_npz(path: str | Path, error: type[InputError] = FormatError) -> dict[str, Any]:
+    """Every array of an ``.npz``, refused before decoding where a member could not be what it declares.
+
+    Each member's uncompressed size must be within ``max_array_bytes`` and its ``.npy`` header must
+    declare a plain (non-object) dtype and a shape whose bytes fit the member: a forged header can
+    otherwise make NumPy allocate terabytes before it reads a byte.
+
+    Raises:
+        FormatError: unreadable, a member over the limit or with a forged header (one line, naming the file and array).
+    """
+    import zipfile
+
+    import numpy as np
+
     bound = limits().max_array_bytes
-    for info in zip_file.infolist():
-        if info.file_size > bound:
-            raise over(path, info.filename.removesuffix(".npy"), "uncompressed size", info.file_size, "max_array_bytes")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            for info in archive.infolist():
+                field = info.filename.removesuffix(".npy")
+                if info.file_size > bound:
+                    raise over(path, field, "uncompressed size", info.file_size, "max_array_bytes", error)
+                with archive.open(info) as member:
+                    version = np.lib.format.read_magic(member)
+                    reader = (
+                        np.lib.format.read_array_header_1_0
+                        if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0
+                    )
+                    shape, _, dtype = reader(member)
+                if dtype.hasobject:
+                    raise error(path, field, "object arrays are not accepted")
+                declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if declared > info.file_size:
+                    raise error(
+                        path, field, f"header declares {declared:,} bytes of data in a member of {info.file_size:,}"
+                    )
+        with np.load(path, allow_pickle=False) as data:
+            return {key: data[key] for key in data.files}
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
+        raise error(path, "", f"not a readable npz ({exc})") from None

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from song.datasets.limits import check_npz_members
+from song.datasets.limits import read_npz
 from song.datasets.scenes.ply import GaussianCloud, read_gaussian_ply, write_standard_ply
 from song.errors import FormatError
 from song.geometry.skeleton import N_JOINTS
@@ -141,12 +141,7 @@ def save_avatar(asset: AvatarAsset, folder: str | Path) -> Path:
 
 
 def _read_npz(path: Path) -> dict[str, np.ndarray]:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            check_npz_members(data.zip, path)  # sizes before decoding
-            return {key: data[key] for key in data.files}
-    except (OSError, ValueError, AttributeError) as exc:
-        raise FormatError(path, "", f"cannot read ({exc})") from None
+    return read_npz(path)
 
 
 def _parse_meta(arrays: dict[str, np.ndarray], path: Path) -> dict[str, Any]:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from song.datasets.avatars.asset import AvatarAsset
-from song.datasets.limits import check_npz_members
+from song.datasets.limits import read_npz
 from song.datasets.scenes.ply import GaussianCloud
 from song.errors import FormatError
 from song.geometry.fk import skinning_transforms
@@ -50,9 +50,7 @@ def _meta_array(meta: dict[str, Any]) -> np.ndarray:
 
 def _read(path: Path, expected_format: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     try:
-        with np.load(path, allow_pickle=False) as data:
-            check_npz_members(data.zip, path)  # sizes before decoding
-            arrays = {key: data[key] for key in data.files}
+        arrays = read_npz(path)
         meta = json.loads(arrays.pop("meta_json").tobytes().decode("utf-8"))
     except (OSError, ValueError, KeyError, UnicodeDecodeError, AttributeError) as exc:
         raise FormatError(path, "", f"cannot read avatar cache ({exc})") from None

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from song.datasets.limits import read_npz
 from song.datasets.run.layout import NAVMESH_FILE
 from song.datasets.scenes import ScenePackage
 from song.errors import FormatError, StageError
@@ -46,8 +47,8 @@ def load_navmesh(path: str | Path) -> Navmesh:
     path = Path(path)
     if path.is_dir():
         path = path / NAVMESH_FILE
+    arrays = read_npz(path)
     try:
-        with np.load(path) as data:
-            return navmesh_from_arrays(data)
-    except (OSError, KeyError, ValueError) as exc:
+        return navmesh_from_arrays(arrays)
+    except (KeyError, ValueError) as exc:
         raise FormatError(path, "", f"cannot read the navmesh: {exc}") from exc

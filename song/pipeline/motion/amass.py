@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from song.datasets.limits import read_npz
 from song.errors import FormatError
 from song.geometry.rotations import (
     axis_angle_to_quat,
@@ -121,11 +122,7 @@ def write_amass(path: str | Path, amass: dict[str, Any]) -> None:
 
 def read_amass(path: str | Path) -> dict[str, np.ndarray]:
     """Read an AMASS ``.npz`` (SMPL-H ``poses`` or SMPL-X ``root_orient``/``pose_body``/``pose_hand``)."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            out = {key: data[key] for key in data.files}
-    except (OSError, ValueError) as exc:
-        raise FormatError(path, "", f"not a readable npz ({exc})") from None
+    out = read_npz(path)
     if "poses" not in out:
         if not {"root_orient", "pose_body"} <= out.keys():
             raise FormatError(path, "poses", "neither SMPL-H poses nor SMPL-X root_orient/pose_body present")

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from song.datasets.limits import read_npz
 from song.datasets.run.layout import AMASS_FILE, MOTION_FILE, MOTION_META_FILE
 from song.errors import FormatError
 from song.geometry.fk import forward_kinematics
@@ -83,11 +84,7 @@ def load_motion(traj_dir: str | Path) -> LoadedMotion:
     """
     traj_dir = Path(traj_dir)
     path = traj_dir / MOTION_FILE
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError) as exc:
-        raise FormatError(path, "", f"cannot read motion ({exc})") from None
+    arrays = read_npz(path)
     missing = [key for key in _KEYS if key not in arrays]
     if missing:
         raise FormatError(path, missing[0], "missing array (see docs/contracts.md)")
