@@ -37,6 +37,7 @@ from song.errors import FormatError
 from song.geometry.rotations import matrix_to_quat, quat_mul, quat_normalize
 from song.geometry.skeleton import rest_joints
 
+MIN_SPLATS = 100  # fewer Gaussians cannot cover the 24 skinned body parts of a person
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
 
 
@@ -156,10 +157,18 @@ def import_ply_avatar(
     path = Path(path)
     cloud = read_gaussian_ply(path)
     points = cloud.means.astype(np.float64)
+    if len(points) < MIN_SPLATS:
+        raise FormatError(path, "vertex", f"{len(points)} splats; an avatar needs at least {MIN_SPLATS}")
     rotation = canonical_frame(points, path, up, forward)
     body = points @ rotation.T
-    scale = height_m / float(np.ptp(body[:, 2]))
-    hips = _slice(body, np.array([0.0, 0.0, 1.0]), 0.45, 0.55)[:, :2].mean(axis=0)
+    extent = float(np.ptp(body[:, 2]))
+    if not extent > 0:
+        raise FormatError(path, "vertex", "the splats have no extent along the up axis")
+    scale = height_m / extent
+    at_hips = _slice(body, np.array([0.0, 0.0, 1.0]), 0.45, 0.55)
+    if not len(at_hips):
+        raise FormatError(path, "vertex", "no splats at hip height (45-55 % of the body's height)")
+    hips = at_hips[:, :2].mean(axis=0)
     offset = -np.array([hips[0], hips[1], body[:, 2].min()])
     means = (body + offset) * scale
     problems = human_shape_problems(means, height_m)

@@ -121,3 +121,17 @@ def test_people_pass_the_plausibility_check_and_objects_do_not(tmp_path) -> None
 def test_the_guitar_is_not_a_person() -> None:
     with pytest.raises(FormatError, match="does not look like a standing person"):
         import_ply_avatar(GUITAR, "guitar", height_m=1.75)
+
+
+def test_degenerate_splats_are_refused_in_one_line_even_when_forced(tmp_path) -> None:
+    person = capsule_avatar("p", n=3000)
+    g = person.gaussians
+    three = replace(g, **{k: getattr(g, k)[:3] for k in ("means", "quats", "log_scales", "opacity_logits", "sh_dc")})
+    few = replace(person, gaussians=three)
+    with pytest.raises(FormatError, match=r"lhm_export\.ply: vertex: 3 splats; an avatar needs at least 100"):
+        import_ply_avatar(_foreign_ply(tmp_path, few), "few", up="+y", forward="+z", force=True)
+    means = person.gaussians.means.copy()
+    means[:, 2] = 0.9  # every splat at one height: no body height to scale from
+    flat = replace(person, gaussians=replace(person.gaussians, means=means))
+    with pytest.raises(FormatError, match="vertex: the splats have no extent along the up axis"):
+        import_ply_avatar(_foreign_ply(tmp_path, flat), "flat", up="+y", forward="+z", force=True)
