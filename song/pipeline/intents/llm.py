@@ -22,6 +22,7 @@ from typing import Protocol, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from song.errors import MissingDependencyError, SongError
+from song.pipeline.intents.http import bounded_transport
 from song.pipeline.intents.schemas import SCHEMA_VERSION
 from song.util import sha256_bytes, sha256_json, write_text_atomic
 
@@ -29,6 +30,7 @@ KEY_VARIABLES = ("GOOGLE_API_KEY", "GEMINI_API_KEY", "OPENAI_API_KEY")
 RETRY_STATUS = {408, 429, 500, 502, 503, 504}
 MAX_RETRY_AFTER_S = 60.0  # a server's suggested retry delay is honoured up to this
 MAX_REPLY_BYTES = 256 * 1024  # a scene description or a dozen routines is a few KB; larger replies are refused
+MAX_HTTP_BYTES = 4 * MAX_REPLY_BYTES  # the whole HTTP body (the reply JSON-escaped inside its envelope), raw or decoded
 T = TypeVar("T", bound=BaseModel)
 _SLOTS: dict[int, threading.BoundedSemaphore] = {}
 
@@ -139,7 +141,10 @@ class GeminiClient:
         self._types = types
         options = types.HttpOptions(
             timeout=int(timeout_s * 1000),
-            client_args={"follow_redirects": False},  # the key header never goes to another origin
+            client_args={  # the key header never goes to another origin; the reply is bounded as it is read
+                "follow_redirects": False,
+                "transport": bounded_transport(MAX_HTTP_BYTES),
+            },
             **({"base_url": base_url} if base_url else {}),
         )
         try:
@@ -167,11 +172,23 @@ class GeminiClient:
                 raise TransientLLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}"), delay) from None
             raise LLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}")) from None
         except Exception as exc:  # time-outs, refused or dropped connections (httpx errors): all transient
+            _raise_if_refused_body(exc)
             raise TransientLLMError(scrub(f"gemini request failed: {type(exc).__name__}: {exc}")) from None
         text = response.text
         if not text:
             _gemini_refusal(response)
         return text or ""
+
+
+def _raise_if_refused_body(exc: BaseException) -> None:
+    """Raise a non-retryable :class:`LLMError` where the bounded transport refused the body (too large, bad encoding)."""
+    seen: BaseException | None = exc
+    for _ in range(16):  # a bounded walk: exception chains can loop
+        if seen is None:
+            return
+        if isinstance(seen, SongError):
+            raise LLMError(scrub(str(seen))) from None
+        seen = seen.__cause__ or seen.__context__
 
 
 def _name(value: object) -> str:
@@ -215,7 +232,7 @@ class OpenAICompatibleClient:
             api_key=os.environ.get("OPENAI_API_KEY") or "no-key",  # the SDK insists on one; servers may not
             timeout=timeout_s,
             max_retries=0,
-            http_client=openai.DefaultHttpxClient(follow_redirects=False),
+            http_client=openai.DefaultHttpxClient(follow_redirects=False, transport=bounded_transport(MAX_HTTP_BYTES)),
         )
 
     def request(self, prompt: str, schema: type[BaseModel]) -> str:
@@ -246,9 +263,12 @@ class OpenAICompatibleClient:
         except openai.APITimeoutError:
             raise TransientLLMError(f"openai-compatible time-out after {self._client.timeout} s") from None
         except openai.APIConnectionError as exc:  # refused, reset or closed connections
+            _raise_if_refused_body(exc)
             raise TransientLLMError(scrub(f"openai-compatible connection failed: {exc.__cause__ or exc}")) from None
         except openai.OpenAIError as exc:
             raise LLMError(scrub(f"openai-compatible request failed: {type(exc).__name__}: {exc}")) from None
+        except SongError as exc:  # the bounded transport refused the body
+            raise LLMError(scrub(str(exc))) from None
         try:
             choice = reply.choices[0]
             message = choice.message

@@ -13,7 +13,8 @@ the services answer a safety block: Gemini's ``promptFeedback.blockReason`` — 
 ``"candidate"``, a candidate stopped with ``finishReason: SAFETY`` — and OpenAI's ``message.refusal``,
 or with ``text`` = ``"content_filter"``, that finish reason), ``"object"`` (the reply's JSON object as the
 message content itself, not its text), ``"429-string"`` (a 429 whose ``error`` is a bare string) or
-``"drip"`` (a slow-loris reply: one byte every ``delay_s``, each read on time).
+``"drip"`` (a slow-loris reply: one byte every ``delay_s``, each read on time) or ``"gzip-bomb"`` (a
+gzip-encoded 200 whose body decodes to ``delay_s`` MB).
 ``requests`` records what arrived.
 """
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+import zlib
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 # the fields of Gemini's Schema object (the OpenAPI 3.0 subset that responseSchema accepts)
@@ -56,6 +58,19 @@ def _success(kind: str, text: str) -> dict:
     return {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
 
 
+def _gzip_bomb(kind: str, megabytes: int) -> bytes:
+    """A gzip stream of a valid success reply whose text is ``megabytes`` MB of spaces (about 1000:1)."""
+    head, tail = json.dumps(_success(kind, "@")).encode().split(b"@")
+    packer = zlib.compressobj(9, zlib.DEFLATED, 16 + zlib.MAX_WBITS)
+    block = b" " * 2**20
+    return (
+        packer.compress(head)
+        + b"".join(packer.compress(block) for _ in range(megabytes))
+        + packer.compress(tail)
+        + packer.flush()
+    )
+
+
 class FakeServer:
     """Scripted replies (see the module docstring)."""
 
@@ -69,7 +84,7 @@ class FakeServer:
                 body = json.loads(self.rfile.read(length))
                 outer.requests.append({"path": self.path, "headers": dict(self.headers), "body": body})
                 status, text, delay = outer.script.pop(0) if outer.script else (500, "", 0.0)
-                if status != "drip":  # a drip's delay is between its bytes
+                if status not in ("drip", "gzip-bomb"):  # a drip's delay is between its bytes; a bomb's is its size
                     time.sleep(delay)
                 if status == "close":  # the server goes away mid-request
                     self.close_connection = True
@@ -84,6 +99,13 @@ class FakeServer:
                     return
                 if status == "drip":  # a slow-loris server: the reply one byte at a time, each in time
                     self._drip(text, delay)
+                    return
+                if status == "gzip-bomb":  # a small gzip body that decodes to ``delay`` MB of one JSON reply
+                    self._send(
+                        200,
+                        _gzip_bomb(outer.kind, int(delay)),
+                        {"Content-Type": "application/json", "Content-Encoding": "gzip"},
+                    )
                     return
                 if status == "429-string":  # a rate limit whose error is a bare string
                     self._send(429, json.dumps({"error": text}).encode(), {"Content-Type": "application/json"})

@@ -232,3 +232,37 @@ def test_a_slow_loris_server_cannot_hold_a_request_past_its_deadline(make_scene,
     result, _ = _run(make_scene, tmp_path, monkeypatch, kind, script, max_retries=1, timeout_s=1.0)
     assert time.perf_counter() - started < 8.0
     assert result.provenance.fallback and "no complete reply within 1 s" in result.llm_error, result.llm_error
+
+
+@pytest.mark.parametrize("kind", ["gemini", "openai"])
+def test_a_gzip_bomb_is_refused_while_it_is_decoded(make_scene, tmp_path, monkeypatch, kind) -> None:
+    # 256 MB of reply in about 256 KB of gzip: the SDK's client would decode all of it before the size check
+    result, server = _run(make_scene, tmp_path, monkeypatch, kind, [("gzip-bomb", "", 256)] * 3)
+    assert result.provenance.fallback and result.intents  # the offline model stood in
+    assert "decodes to over 1,048,576 bytes (gzip)" in result.llm_error
+    assert len(server.requests) == 1  # a refused body is not retried
+    assert server.requests[0]["headers"]["Accept-Encoding"] == "gzip, deflate"
+
+
+def test_reply_bodies_are_decoded_within_the_bound() -> None:
+    import gzip
+    import zlib
+
+    from song.errors import SongError
+    from song.pipeline.intents.http import ReplyTooLarge, decode_bounded
+
+    text = b'{"routines": []}' * 100
+    assert decode_bounded(text, "", 4096) == text
+    assert decode_bounded(gzip.compress(text), "gzip", 4096) == text
+    assert decode_bounded(zlib.compress(text), "deflate", 4096) == text
+    raw = zlib.compressobj(6, zlib.DEFLATED, -zlib.MAX_WBITS)
+    assert (
+        decode_bounded(raw.compress(text) + raw.flush(), "deflate", 4096) == text
+    )  # raw deflate, as some servers send
+    assert decode_bounded(gzip.compress(gzip.compress(text)), "gzip, gzip", 4096) == text
+    with pytest.raises(ReplyTooLarge, match="decodes to over 1,000 bytes"):
+        decode_bounded(gzip.compress(text), "gzip", 1000)
+    with pytest.raises(SongError, match="unsupported Content-Encoding 'br'"):
+        decode_bounded(text, "br", 4096)
+    with pytest.raises(SongError, match="corrupt gzip body"):
+        decode_bounded(b"\x1f\x8b not gzip", "gzip", 4096)
