@@ -135,6 +135,7 @@ def read_npz(path: str | Path, error: type[InputError] = FormatError) -> dict[st
     import numpy as np
 
     bound = limits().max_array_bytes
+    arrays = {}
     try:
         with zipfile.ZipFile(path) as archive:
             for info in archive.infolist():
@@ -156,8 +157,9 @@ def read_npz(path: str | Path, error: type[InputError] = FormatError) -> dict[st
                     raise error(
                         path, field, f"header declares {declared:,} bytes of data in a member of {info.file_size:,}"
                     )
-        with np.load(path, allow_pickle=False) as data:
-            return {key: data[key] for key in data.files}
+                with archive.open(info) as member:
+                    arrays[field] = np.lib.format.read_array(member, allow_pickle=False)
+        return arrays
     except InputError:
         raise
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:

@@ -171,24 +171,14 @@ class GeminiClient:
                 delay = _gemini_retry_delay(error.get("details") if isinstance(error, dict) else None)
                 raise TransientLLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}"), delay) from None
             raise LLMError(scrub(f"gemini HTTP {exc.code}: {exc.message}")) from None
+        except SongError as exc:  # the bounded transport refused the body
+            raise LLMError(scrub(str(exc))) from None
         except Exception as exc:  # time-outs, refused or dropped connections (httpx errors): all transient
-            _raise_if_refused_body(exc)
             raise TransientLLMError(scrub(f"gemini request failed: {type(exc).__name__}: {exc}")) from None
         text = response.text
         if not text:
             _gemini_refusal(response)
         return text or ""
-
-
-def _raise_if_refused_body(exc: BaseException) -> None:
-    """Raise a non-retryable :class:`LLMError` where the bounded transport refused the body (too large, bad encoding)."""
-    seen: BaseException | None = exc
-    for _ in range(16):  # a bounded walk: exception chains can loop
-        if seen is None:
-            return
-        if isinstance(seen, SongError):
-            raise LLMError(scrub(str(seen))) from None
-        seen = seen.__cause__ or seen.__context__
 
 
 def _name(value: object) -> str:
@@ -263,7 +253,6 @@ class OpenAICompatibleClient:
         except openai.APITimeoutError:
             raise TransientLLMError(f"openai-compatible time-out after {self._client.timeout} s") from None
         except openai.APIConnectionError as exc:  # refused, reset or closed connections
-            _raise_if_refused_body(exc)
             raise TransientLLMError(scrub(f"openai-compatible connection failed: {exc.__cause__ or exc}")) from None
         except openai.OpenAIError as exc:
             raise LLMError(scrub(f"openai-compatible request failed: {type(exc).__name__}: {exc}")) from None
