@@ -117,7 +117,7 @@ def graded_inputs(folder: SceneFolder) -> str:
     """sha256 of a scene's completed stages (their outputs and the scene files they read): what a grade used."""
     record = read_json_object(folder.stages)
     done = {name: {"outputs": e.get("outputs", {}), "scene": e.get("scene", {})} for name, e in record.items()
-            if isinstance(e, dict) and e.get("status") == "ok"}  # fmt: skip
+            if _completed(record, name)}  # fmt: skip
     return sha256_json(done)
 
 
@@ -129,9 +129,7 @@ def check_scene_unchanged(folder: SceneFolder, package_root: Path) -> None:
             inputs (a run from an older song: re-run ``song synth``, it resumes).
     """
     record = read_json_object(folder.stages)
-    completed = {
-        name: entry for name, entry in sorted(record.items()) if isinstance(entry, dict) and entry.get("status") == "ok"
-    }
+    completed = {name: entry for name, entry in sorted(record.items()) if _completed(record, name)}
     if not completed:
         raise StageError(f"{folder.stages}: no completed stage for scene '{folder.scene_id}'; run `song synth` first")
     present = {name: package_root / name for name in PACKAGE_FILES if (package_root / name).is_file()}
