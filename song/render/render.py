@@ -145,7 +145,7 @@ def gsplat_available() -> str:
 def _render_gsplat(sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray, profile=None) -> RenderOutput:
     from song.render.gsplat_backend import render_gsplat
 
-    return render_gsplat(concat(sets), camera, background, EPS2D)
+    return render_gsplat(sets, camera, background, EPS2D)
 
 
 plugins.add("render_backend", "numba", _render_numba)
@@ -198,3 +198,37 @@ def render(
             log.warning(_GSPLAT_STATE["error"])
             name = "numba"
     return plugins.lookup("render_backend", name)(sets, camera, bg, profile)
+
+
+def render_batch(
+    gaussians: GaussianSet | Sequence[GaussianSet],
+    cameras: Sequence[Camera],
+    backend: str = "auto",
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> list[RenderOutput]:
+    """The same Gaussians seen by several cameras of one size (the views of a vector env's robots).
+
+    gsplat renders them in one call (its batched ``viewmats``); the CPU backends render one view after
+    another. Each output equals :func:`render` of that camera alone.
+
+    Raises:
+        ValueError: cameras of different sizes or clip planes.
+    """
+    sets = [gaussians] if isinstance(gaussians, GaussianSet) else list(gaussians)
+    if len({(c.width, c.height, c.near, c.far) for c in cameras}) > 1:
+        raise ValueError("render_batch: every camera must have the same size and clip planes")
+    if not cameras:
+        return []
+    if resolve_backend(backend) == "gsplat":
+        from song.render.gsplat_backend import render_gsplat_batch
+
+        bg = np.asarray(background, dtype=np.float64).reshape(3)
+        try:
+            return render_gsplat_batch(sets, cameras, bg, EPS2D)
+        except Exception as exc:
+            if backend != "auto":
+                raise
+            _GSPLAT_STATE["error"] = f"gsplat failed ({type(exc).__name__}: {exc}); rendering with numba on the CPU"
+            log.warning(_GSPLAT_STATE["error"])
+            backend = "numba"
+    return [render(sets, camera, backend, background) for camera in cameras]
