@@ -75,6 +75,10 @@ def _compare(ours, theirs) -> dict:
         "depth_max_m": round(float(dd.max()), 4) if dd.size else None,
         "alpha_max": float(np.abs(ours.alpha - theirs.alpha).max()),
         "alpha_p99": float(np.percentile(np.abs(ours.alpha - theirs.alpha), 99)),
+        "alpha_px_over_1e-3": int((np.abs(ours.alpha - theirs.alpha) > 1e-3).sum()),
+        "alpha_at_worst": [
+            float(a.flat[np.abs(ours.alpha - theirs.alpha).argmax()]) for a in (ours.alpha, theirs.alpha)
+        ],
         "coverage": round(float((theirs.alpha > 0.5).mean()), 3),
     }
 
@@ -227,7 +231,7 @@ def throughput(bench: Benchmark, scenes: dict[str, Path]) -> dict:
 def lbs_rates(bench: Benchmark) -> dict:
     import torch
 
-    from song.geometry.lbs import lbs
+    from song.geometry.lbs import lbs, lbs_positions
 
     view = SceneView("numba")
     ep = next(iter(bench.episodes()))
@@ -241,6 +245,7 @@ def lbs_rates(bench: Benchmark) -> dict:
         torch.from_numpy(np.ascontiguousarray(transforms)).to(gsplat_backend.DEVICE),
     )
     gpu = _timed(lambda: lbs(skin, block), 20)
+    gpu_positions = _timed(lambda: lbs_positions(skin, block), 20)
     pos_np, rot_np = lbs(avatar.skin, transforms)
     pos_t, rot_t = lbs(skin, block)
     return {
@@ -248,6 +253,7 @@ def lbs_rates(bench: Benchmark) -> dict:
         "frames": len(transforms),
         "numpy_cpu_M_per_s": round(gf / cpu / 1e6, 1),
         "torch_cuda_M_per_s": round(gf / gpu / 1e6, 1),
+        "torch_cuda_positions_only_M_per_s": round(gf / gpu_positions / 1e6, 1),
         "max_abs_diff_positions_m": float(np.abs(pos_t.cpu().numpy() - pos_np).max()),
         "max_abs_diff_quats": float(np.abs(np.abs(rot_t.cpu().numpy()) - np.abs(rot_np)).max()),
     }

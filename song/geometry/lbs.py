@@ -174,8 +174,9 @@ def lbs_rotations(skin: SkinnedGaussians, transforms: Any, block: int | None = N
 
     With numpy inputs and numba installed a compiled loop computes the same definition (3–5× faster);
     otherwise the elementwise extraction runs over blocks of about ``block`` Gaussian-frames (default 4096 for
-    numpy, 65536 for torch, measured) so its ~70 array passes stay in cache (numpy: 3× faster than
-    whole-array passes on 2 cores).
+    numpy, 65536 for torch on the CPU, measured) so its ~70 array passes stay in cache (numpy: 3× faster than
+    whole-array passes on 2 cores). On a CUDA device the default block is 16 M Gaussian-frames: there
+    each pass is one kernel launch, and small blocks made it launch-bound.
     """
     xp = _xp(skin.weights)
     frames, single = _frames_first(transforms)
@@ -184,8 +185,8 @@ def lbs_rotations(skin: SkinnedGaussians, transforms: Any, block: int | None = N
         rotations = np.ascontiguousarray(frames[..., :3], dtype=np.float64)
         posed = rotations_kernel(skin.top_indices, skin.top_weights, skin.quats, rotations)
         return posed[0] if single else posed
-    if block is None:
-        block = 1 << 12 if xp is np else 1 << 16
+    if block is None:  # on a GPU one block holds every frame: launches, not cache, bound it there
+        block = 1 << 12 if xp is np else (1 << 24 if skin.weights.is_cuda else 1 << 16)
     step = max(1, block // max(len(skin), 1))
     parts = []
     for start in range(0, n_frames, step):

@@ -21,7 +21,7 @@ import numpy as np
 
 from song.render.camera import Camera
 from song.render.gaussians import GaussianSet
-from song.render.output import RenderOutput, to_uint8
+from song.render.output import RenderOutput
 
 DEVICE = "cuda"  # tests point it at "cpu" to run the same code against a stand-in rasterizer
 _RESIDENT: dict[int, tuple[Any, ...]] = {}  # id(set) -> (means, quats, scales, opacities, sh) on DEVICE
@@ -100,13 +100,13 @@ def render_gsplat_batch(
         packed=False,
         rasterize_mode="classic",
     )
-    out = colors.float().cpu().numpy()
-    alpha = alphas[..., 0].float().cpu().numpy()
-    results = []
-    for c in range(len(cameras)):
-        depth = np.where(alpha[c] > 0, out[c, ..., 3], 0.0).astype(np.float32)
-        rgb = out[c, ..., :3].astype(np.float32)
-        results.append(RenderOutput(to_uint8(rgb), depth, alpha[c].astype(np.float32), rgb))
+    # the per-pixel finishing runs on the device too: only the four images come back
+    rgb = colors[..., :3].float()
+    alpha = alphas[..., 0].float()
+    depth = torch.where(alpha > 0, colors[..., 3].float(), torch.zeros_like(alpha))
+    rgb8 = torch.round(rgb.clamp(0.0, 1.0) * 255.0).to(torch.uint8)  # half to even, as np.rint
+    rgb8, rgb, depth, alpha = (x.cpu().numpy() for x in (rgb8, rgb, depth, alpha))
+    results = [RenderOutput(rgb8[c], depth[c], alpha[c], rgb[c]) for c in range(len(cameras))]
     return results
 
 

@@ -53,6 +53,18 @@ def test_torch_matches_numpy_and_single_frame() -> None:
     np.testing.assert_allclose(single, positions[1], atol=1e-6)
 
 
+def test_cuda_matches_numpy_in_one_block() -> None:
+    torch = pytest.importorskip("torch")
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device")
+    means, quats, indices, weights, transforms = _random_case(8, n=500, frames=40)  # pragma: no cover
+    skin = SkinnedGaussians.build(means, quats, indices, weights)
+    positions, rotations = lbs(skin, transforms)
+    t_pos, t_rot = lbs(skin.to_torch("cuda"), torch.from_numpy(transforms).cuda())
+    assert np.abs(t_pos.cpu().numpy() - positions).max() <= 1e-5 * np.abs(positions).max()
+    assert np.abs(_aligned(t_rot.cpu().numpy(), rotations) - rotations).max() <= 1e-5
+
+
 def test_rest_pose_is_identity_and_rigid_binding_is_rigid() -> None:
     means, quats, indices, weights, _ = _random_case(3, frames=1)
     rest = rest_joints(1.7)
