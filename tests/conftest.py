@@ -128,3 +128,22 @@ def sample_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     results = list(iter_run(SAMPLES, run, SongConfig(seed=1), ["intents", "crowd"], executor="serial"))
     assert all(r.status == "ok" for r in results), [r.error for r in results]
     return run
+
+
+def _outside_snapshot(tmp_path: Path) -> tuple:
+    """What a hostile case must leave alone: the folders beside its own, the checkout's top level, the golden release."""
+    root = Path(__file__).resolve().parents[1]
+    golden = root / "tests" / "artifacts"
+    return (
+        sorted(p.name for p in tmp_path.parent.iterdir()),
+        sorted(p.name for p in root.iterdir()),
+        sorted((str(p.relative_to(golden)), p.stat().st_size, p.stat().st_mtime_ns) for p in golden.rglob("*")),
+    )
+
+
+@pytest.fixture
+def nothing_written_outside(tmp_path: Path):
+    """Fails the test when anything outside its ``tmp_path`` appeared, vanished or changed (see the snapshot)."""
+    before = _outside_snapshot(tmp_path)
+    yield
+    assert _outside_snapshot(tmp_path) == before, "a hostile case wrote outside its output folder"

@@ -36,6 +36,11 @@ ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = ROOT / "tests" / "artifacts" / "bench_golden" / "1.0.0"
 
 
+@pytest.fixture(autouse=True)
+def _confined(nothing_written_outside) -> None:
+    """Every case here must leave everything outside its own tmp_path as it was."""
+
+
 # 1. a release always matches what was synthesised ------------------------------------------------
 
 

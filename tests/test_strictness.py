@@ -21,6 +21,11 @@ from song.util import finite_json, folder_lock, write_json_atomic
 GOLDEN = Path(__file__).resolve().parent / "artifacts" / "bench_golden"
 
 
+@pytest.fixture(autouse=True)
+def _confined(nothing_written_outside) -> None:
+    """Every case here must leave everything outside its own tmp_path as it was."""
+
+
 def _fail(name: str) -> None:
     raise AssertionError(f"non-standard JSON constant {name}")
 

@@ -18,6 +18,11 @@ from song.errors import SceneError
 from tests.conftest import splat_file
 
 
+@pytest.fixture(autouse=True)
+def _confined(nothing_written_outside) -> None:
+    """Every case here must leave everything outside its own tmp_path as it was."""
+
+
 def _edit_map(fn: Callable[[dict], None]) -> Callable[[Path], None]:
     def apply(root: Path) -> None:
         data = json.loads((root / "semantic_map.json").read_text())

@@ -18,6 +18,11 @@ KEY = "test-key-SECRET-1234567890"
 DESC = json.dumps({"description": "An office: desk_1 in room_a, sofa_1 in room_b, printer_1 near the door."})
 
 
+@pytest.fixture(autouse=True)
+def _confined(nothing_written_outside) -> None:
+    """Every case here must leave everything outside its own tmp_path as it was."""
+
+
 def routines(*pairs: tuple[str, str]) -> str:
     return json.dumps(
         {"routines": [{"start_object": a, "goal_object": b, "activity": f"walks from {a} to {b}"} for a, b in pairs]}
