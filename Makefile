@@ -37,6 +37,8 @@ demo: setup
 	SOURCE_DATE_EPOCH=1700000000 $(SONG) export-bench --run $(RUN) --bench $(BENCH) --version 1.0.0 --notes "make demo"
 	$(SONG) bench verify $(BENCH)
 	$(SONG) eval --bench $(BENCH) --policy straight --policy astar --policy social --out $(EVAL) --workers 2
+	# the avatar-free ablation of the map baselines: results.md shows its rows beside the main ones
+	$(SONG) eval --bench $(BENCH) --policy straight --policy astar --no-avatars --out $(EVAL) --workers 2
 	# the vision baseline renders every step: a first slice of the release at 160x120 keeps the demo short
 	$(SONG) eval --bench $(BENCH) --policy depth --resolution 160x120 --limit 8 --out $(EVAL)-depth --workers 2
 	$(SONG) viz bench --bench $(BENCH) --out $(FIGURES) --results $(EVAL)/straight.json --results $(EVAL)/astar.json --results $(EVAL)/social.json

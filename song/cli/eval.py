@@ -62,15 +62,23 @@ def eval_command(
     isolate: bool = typer.Option(
         False, "--isolate", help="run the policy in a process of its own (for leaderboard-style results)"
     ),
+    episode: list[str] | None = typer.Option(
+        None, "--episode", help="only this episode id (repeatable); --difficulty/--split/--limit then do not apply"
+    ),
+    no_avatars: bool = typer.Option(
+        False, "--no-avatars", help="the avatar-free ablation: the same episodes without pedestrians (unofficial)"
+    ),
 ) -> None:
     """Run policies on every episode; write per-episode Parquet and the paper's metric table.
 
     The robot, camera and pedestrian parameters come from the release; a config file or ``--set`` that
-    changes them needs ``--override``, and the results then record the change.
+    changes them needs ``--override``, and the results then record the change. ``results.md`` in the
+    output folder tables every result there, so an ablation run into the same folder appears beside
+    the main rows.
     """
     from song.config import parse_assignments, read_config_mapping
     from song.datasets.bench import open_benchmark  # imported here: `--help` stays fast
-    from song.runtime.evaluate import iter_eval, make_setup, write_results
+    from song.runtime.evaluate import iter_eval, make_setup, results_in, write_results
     from song.runtime.metrics import markdown_table
     from song.runtime.params import apply_overrides
 
@@ -85,14 +93,19 @@ def eval_command(
     if resolution:
         width, height = parse_size(resolution, "--resolution")
         camera.update(width=width, height=height)
-    whole = not difficulty and not limit and release.splits() == {split}
-    episodes = None if whole else list(release.episodes(difficulty=difficulty, split=split))
-    if limit is not None:
+    whole = not difficulty and not limit and not episode and release.splits() == {split}
+    if episode:
+        episodes = [release.episode(e) for e in dict.fromkeys(episode)]
+    else:
+        episodes = None if whole else list(release.episodes(difficulty=difficulty, split=split))
+    if limit is not None and not episode:
         episodes = episodes[:limit]
     total = len(episodes) if episodes is not None else len(release)
     table = {}
     for name in policy:
-        setup = make_setup(release, name, sensors, params, changed, camera, step_timeout, allow_modified, isolate)
+        setup = make_setup(
+            release, name, sensors, params, changed, camera, step_timeout, allow_modified, isolate, no_avatars
+        )
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:
@@ -100,8 +113,8 @@ def eval_command(
             for result in iter_eval(release, setup, episodes, resolve_workers(workers)):
                 results.append(result)
                 progress.advance(task)
-        table[name] = write_results(out, setup, results, release)["metrics"]
-    text = markdown_table(table)
+        table[setup.label] = write_results(out, setup, results, release)["metrics"]
+    text = markdown_table(results_in(out, table))
     (out / "results.md").write_text(text, encoding="utf-8")
     typer.echo(text)
 
@@ -125,6 +138,9 @@ def collect_command(
     allow_modified: bool = typer.Option(
         False, "--allow-modified", help="collect from a release edited since export (recorded in the dataset)"
     ),
+    no_avatars: bool = typer.Option(
+        False, "--no-avatars", help="the avatar-free ablation: episodes without pedestrians (recorded in the dataset)"
+    ),
 ) -> None:
     """Roll a policy out on training episodes; write what imitation learning needs (LeRobot dataset layout)."""
     from song.runtime.collect import collect
@@ -142,6 +158,7 @@ def collect_command(
         keep,
         resolve_workers(workers),
         allow_modified=allow_modified,
+        no_avatars=no_avatars,
     )
     console.print(
         f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "

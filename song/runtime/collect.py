@@ -45,6 +45,7 @@ import numpy as np
 
 from song.datasets.bench import open_benchmark
 from song.errors import SongError
+from song.runtime.ablation import without_avatars
 from song.runtime.avatars import make_collider
 from song.runtime.env import reward_terms
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
@@ -171,6 +172,7 @@ class CollectJob:
     sensors: tuple[str, ...]
     camera: dict[str, Any]
     step_timeout_s: float
+    no_avatars: bool = False
 
 
 class _Recorder:
@@ -197,6 +199,8 @@ def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:
         cache[job.bench] = open_benchmark(job.bench)
     bench = cache[job.bench]
     episode = dataclasses.replace(bench.episode(job.episode_id), params=bench.params)
+    if job.no_avatars:
+        episode = without_avatars(episode)
     recorder = _Recorder(load_policy(job.policy))
     names = tuple(dict.fromkeys([*policy_sensors(recorder.policy), *job.sensors]))
     suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, {"camera": dict(job.camera)})
@@ -280,6 +284,7 @@ def collect(
     workers: int = 1,
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
     allow_modified: bool = False,
+    no_avatars: bool = False,
 ) -> CollectSummary:
     """Roll ``policy_name`` out on the ``split`` episodes of a release into a LeRobot dataset at ``out``.
 
@@ -296,6 +301,7 @@ def collect(
             the dataset does not depend on the worker count).
         step_timeout_s: a policy call taking longer fails its episode.
         allow_modified: collect from a release that fails its integrity check (recorded in ``info.json``).
+        no_avatars: the avatar-free ablation: episodes without pedestrians (recorded in ``info.json``).
 
     Raises:
         SongError: an unknown sensor or ``keep``, an existing non-empty ``out``, or an unknown split.
@@ -322,7 +328,9 @@ def collect(
         shutil.rmtree(partial, ignore_errors=True)
         fps = float(bench.params.robot.control_hz)
         jobs = [
-            CollectJob(str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s)
+            CollectJob(
+                str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s, no_avatars
+            )
             for e in episodes
         ]
         done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
@@ -332,7 +340,7 @@ def collect(
         successes = sum(r["outcome"] == "success" for r in rollouts)
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
                  "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
-                 "release_check": bench.integrity or "ok"}  # fmt: skip
+                 "release_check": bench.integrity or "ok", "ablation": "no_avatars" if no_avatars else None}  # fmt: skip
         _write_meta(partial, kept, written, fps, split, about)
         for name in ("data", "videos", "meta"):  # the dataset appears complete, meta (its index) last
             if (partial / name).exists():

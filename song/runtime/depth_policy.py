@@ -135,3 +135,26 @@ class DepthPolicy:
             command = (0.0, max_w if goal[1] >= 0 else -max_w)
         self.last = command
         return command
+
+
+class DepthWaypoints:
+    """``depth`` as a waypoint policy at the control rate: the chosen command's 2 s rollout as waypoints."""
+
+    sensors = DepthPolicy.sensors
+    rate_hz = 10.0
+
+    def __init__(self) -> None:
+        self.inner = DepthPolicy()
+
+    def reset(self, episode: Episode) -> None:
+        """Reset the depth policy."""
+        self.inner.reset(episode)
+
+    def plan(self, observation: dict[str, Any]) -> np.ndarray:
+        """The rollout (robot frame) of the command ``depth`` picks; a point to the side when it turns on the spot."""
+        inner = self.inner
+        v, omega = inner.act(observation)
+        if v <= 0.0:
+            return np.array([[0.0, 0.3 if omega >= 0 else -0.3]])
+        best = int(np.argmin(np.abs(inner.commands[:, 0] - v) + np.abs(inner.commands[:, 1] - omega)))
+        return inner.rollouts[best]

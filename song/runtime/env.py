@@ -18,6 +18,7 @@ from song.datasets.bench import open_benchmark
 from song.datasets.bench.schema import SCHEMA_VERSION, schema_major
 from song.datasets.bench.types import RuntimeParams
 from song.errors import MissingDependencyError
+from song.runtime.ablation import without_avatars
 from song.runtime.avatars import make_collider
 from song.runtime.guard import PolicyFailure, as_command
 from song.runtime.loop import EpisodeRunner
@@ -47,6 +48,8 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         sensors: sensor names (default ``("state", "scan")``).
         params: runtime parameters to use instead of the release's (an explicit override).
         sensor_options: per-sensor keyword options.
+        allow_modified: use a release edited since export.
+        no_avatars: the avatar-free ablation: episodes without pedestrians (neither rendered nor colliding).
 
     Observation: ``{sensor name: output}``; action: Box [v, ω] within the robot's limits.
     """
@@ -62,6 +65,7 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         params: RuntimeParams | None = None,
         sensor_options: dict[str, dict] | None = None,
         allow_modified: bool = False,
+        no_avatars: bool = False,
     ) -> None:
         _require_gym()
         from gymnasium import spaces
@@ -80,6 +84,7 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         )
         self.observation_space = to_gym_space(self.sensors.space())
         self.runner: EpisodeRunner | None = None
+        self.no_avatars = no_avatars
 
     def _info(self) -> dict[str, Any]:
         runner = self.runner
@@ -97,6 +102,8 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         if episode_id is None:
             episode_id = self.episode_ids[int(self.np_random.integers(len(self.episode_ids)))]
         episode = dataclasses.replace(self.bench.episode(episode_id), params=self.params)
+        if self.no_avatars:
+            episode = without_avatars(episode)
         self.runner = EpisodeRunner(episode, make_collider(episode), self.sensors)
         return self.runner.observation(), self._info()
 

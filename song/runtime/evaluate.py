@@ -23,12 +23,13 @@ from song.datasets.bench import Benchmark, Episode, open_benchmark
 from song.datasets.bench.schema import DIFFICULTIES
 from song.datasets.bench.types import RuntimeParams
 from song.parallel import parallel_map
+from song.runtime.ablation import without_avatars
 from song.runtime.avatars import make_collider
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.isolate import IsolatedPolicy
 from song.runtime.loop import EpisodeResult, run_episode
 from song.runtime.metrics import aggregate, markdown_table
-from song.runtime.policies import load_policy, policy_sensors
+from song.runtime.policies import load_policy, policy_info, policy_sensors
 from song.runtime.sensors import SensorSuite, parse_sensor_names
 from song.util import write_bytes_atomic, write_json_atomic, write_text_atomic
 
@@ -68,6 +69,9 @@ class EvalSetup:
         sensor_options: per-sensor keyword options.
         step_timeout_s: the longest one ``reset``/``act`` call may take before its episode fails.
         isolate: run the policy in a process of its own (:mod:`song.runtime.isolate`).
+        no_avatars: the avatar-free ablation: the same episodes without pedestrians (neither rendered
+            nor colliding; results are not official).
+        policy_info: how the policy is driven (its kind, and a waypoint policy's rate and tracker).
     """
 
     policy: str
@@ -77,6 +81,13 @@ class EvalSetup:
     sensor_options: dict[str, dict] = field(default_factory=dict)
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S
     isolate: bool = False
+    no_avatars: bool = False
+    policy_info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def label(self) -> str:
+        """The name results are filed under: the policy, with `` (no avatars)`` for the ablation."""
+        return f"{self.policy} (no avatars)" if self.no_avatars else self.policy
 
 
 def make_setup(
@@ -89,6 +100,7 @@ def make_setup(
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
     allow_modified: bool = False,
     isolate: bool = False,
+    no_avatars: bool = False,
 ) -> EvalSetup:
     """The setup of one policy; a release that no longer matches its fingerprint is refused first.
 
@@ -102,18 +114,21 @@ def make_setup(
         step_timeout_s: per-call time limit of the policy (its episode fails past it).
         allow_modified: run on a release that fails :attr:`Benchmark.integrity` (results unofficial).
         isolate: run the policy in a process of its own; its code never runs in this one.
+        no_avatars: run the avatar-free ablation (:func:`song.runtime.ablation.without_avatars`).
     """
     bench.require_intact(allow_modified)
     if isolate:  # the policy's code (its module too) runs only in its own process
         probe = IsolatedPolicy(policy, step_timeout_s)
-        declared, _ = probe.sensors, probe.close()
+        declared, info, _ = probe.sensors, probe.info, probe.close()
     else:
-        declared = policy_sensors(load_policy(policy))
+        loaded = load_policy(policy)
+        declared, info = policy_sensors(loaded), policy_info(loaded)
     names = parse_sensor_names([*declared, *parse_sensor_names(sensors or [])])
     options = {"camera": dict(camera)} if camera else {}
     plugins.check_name("render_backend", options.get("camera", {}).get("backend", "auto"), extra=("auto",))
     plugins.check_name("camera_model", options.get("camera", {}).get("model", "ideal"))
-    return EvalSetup(policy, names, params or bench.params, dict(overrides or {}), options, step_timeout_s, isolate)
+    params = params or bench.params
+    return EvalSetup(policy, names, params, dict(overrides or {}), options, step_timeout_s, isolate, no_avatars, info)
 
 
 @dataclass(frozen=True)
@@ -131,6 +146,8 @@ def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  
     bench = cache[job.bench]
     setup = job.setup
     episode = dataclasses.replace(bench.episode(job.episode_id), params=setup.params)
+    if setup.no_avatars:
+        episode = without_avatars(episode)
     if setup.isolate:  # the child enforces the step limit itself (and is killed past it)
         policy, limit = _isolated(setup), None
     else:
@@ -212,11 +229,13 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
             "fingerprint": bench.info.fingerprint,
         },
         "policy": setup.policy,
+        **(setup.policy_info or {"policy_kind": "commands"}),
         "sensors": sensors.describe(),
         "privileged": sensors.privileged,  # any sensor a real robot could not have (other agents' true states)
         "params": setup.params.to_json(),
         "overrides": setup.overrides,
-        "official": not setup.overrides and not bench.integrity,
+        "official": not setup.overrides and not bench.integrity and not setup.no_avatars,
+        "ablation": "no_avatars" if setup.no_avatars else None,
         "release_check": bench.integrity or "ok",  # the fingerprint, info.json and the tables, checked at open
         "step_timeout_s": setup.step_timeout_s,
         "policy_process": "isolated" if setup.isolate else "in-process",
@@ -226,14 +245,37 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
 def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult], bench: Benchmark) -> dict[str, Any]:
     """Write ``<policy>.parquet``, ``<policy>.json`` and ``<policy>.md`` into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    safe = setup.policy.replace(":", "_").replace("/", "_")
+    safe = setup.policy.replace(":", "_").replace("/", "_") + ("-no-avatars" if setup.no_avatars else "")
     about = provenance(bench, setup)
-    table = results_table(results, setup.policy)
+    table = results_table(results, setup.label)
     table = table.replace_schema_metadata({b"song.eval": json.dumps(about, sort_keys=True).encode()})
     buffer = io.BytesIO()
     pq.write_table(table, buffer, compression="zstd")
     write_bytes_atomic(out_dir / f"{safe}.parquet", buffer.getvalue())
     summary = {**about, "benchmark": str(bench.root), "version": bench.version, "metrics": summarize(results)}
     write_json_atomic(out_dir / f"{safe}.json", summary)  # strict JSON: non-finite metrics are null
-    write_text_atomic(out_dir / f"{safe}.md", markdown_table({setup.policy: summary["metrics"]}))
+    write_text_atomic(out_dir / f"{safe}.md", markdown_table({setup.label: summary["metrics"]}))
     return summary
+
+
+def results_in(out_dir: Path, latest: dict[str, dict] | None = None) -> dict[str, dict]:
+    """The metric rows of every results file in ``out_dir`` (plus ``latest``), each ablation after its main row.
+
+    A file that is not a results summary is skipped; ``latest`` wins over a file of the same label.
+    """
+    rows: dict[str, dict] = {}
+    for path in sorted(out_dir.glob("*.json")):
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            label = data["policy"] + (" (no avatars)" if data.get("ablation") == "no_avatars" else "")
+            rows[label] = {  # strict JSON stores a non-finite metric as null
+                d: {k: float("nan") if v is None else v for k, v in row.items()} for d, row in data["metrics"].items()
+            }
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    rows.update(latest or {})
+    order = {d: k for k, d in enumerate((*DIFFICULTIES, "all"))}
+    ordered = {
+        label: dict(sorted(by.items(), key=lambda kv: order.get(kv[0], len(order)))) for label, by in rows.items()
+    }
+    return dict(sorted(ordered.items(), key=lambda kv: (kv[0].removesuffix(" (no avatars)"), kv[0].endswith(")"))))

@@ -24,10 +24,11 @@ NO_LIMIT_S = 3600.0  # the wait for a call when no step limit is set
 
 def _serve(conn, spec: str) -> None:  # pragma: no cover - runs in the child process
     """The child: build the policy from ``spec`` and answer ``sensors``, ``reset`` and ``act`` messages."""
-    from song.runtime.policies import load_policy, policy_sensors
+    from song.runtime.policies import load_policy, policy_info, policy_sensors
 
     try:  # ready: the policy's module is imported and its sensors are known
-        conn.send(("ok", tuple(policy_sensors(load_policy(spec)))))
+        first = load_policy(spec)
+        conn.send(("ok", (tuple(policy_sensors(first)), policy_info(first))))
     except BaseException as exc:
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
@@ -65,6 +66,7 @@ class IsolatedPolicy:
         self._process = None
         self._conn = None
         self.sensors: tuple[str, ...] = ()
+        self.info: dict[str, Any] = {}
         self._start()
 
     def _start(self) -> None:
@@ -74,7 +76,8 @@ class IsolatedPolicy:
         self._process = context.Process(target=_serve, args=(child, self.spec), daemon=True)
         self._process.start()
         child.close()
-        self.sensors = tuple(self._reply("loading the policy", STARTUP_S))
+        sensors, info = self._reply("loading the policy", STARTUP_S)
+        self.sensors, self.info = tuple(sensors), dict(info)
 
     def _call(self, kind: str, payload: Any, what: str) -> Any:
         if self._process is None or not self._process.is_alive():

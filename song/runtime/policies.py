@@ -71,6 +71,16 @@ def policy_sensors(policy: object) -> tuple[str, ...]:
     return (*DEFAULT_SENSORS, "pedestrians") if getattr(policy, "privileged", False) else DEFAULT_SENSORS
 
 
+def policy_info(policy: object) -> dict[str, Any]:
+    """What results record about how a policy is driven: ``{"policy_kind": "commands"}``, or a tracker's description."""
+    describe = getattr(policy, "describe", None)
+    from song.runtime.waypoints import PurePursuitTracker
+
+    if isinstance(policy, PurePursuitTracker) and callable(describe):
+        return describe()
+    return {"policy_kind": "commands"}
+
+
 def steer_to(bearing: float, robot: RobotConfig, gain: float = 2.0, turn_in_place: float = 0.6) -> tuple[float, float]:
     """Drive toward a bearing (rad, robot frame) within the robot's limits: turn on the spot when it is far off."""
     max_w = float(np.deg2rad(robot.max_yaw_rate_deg_s))
@@ -223,8 +233,35 @@ def _depth_policy() -> Policy:
     return DepthPolicy()
 
 
+class AStarWaypoints:
+    """``astar`` as a waypoint policy: every 0.5 s, the next 2 m of the episode's A* path in the robot frame."""
+
+    sensors = ("state", "map")
+    rate_hz = 2.0
+
+    def reset(self, episode: Episode) -> None:
+        """Start following the episode's path."""
+        self.follower = _guidance(episode, lookahead=0.0)
+
+    def plan(self, observation: dict[str, Any]) -> np.ndarray:
+        """Eight waypoints 0.25 m apart along the path ahead of the robot's projection on it."""
+        pose = _pose(observation)
+        self.follower.target(pose[:2])  # advances the projection
+        ahead = np.array([self.follower.point_at(self.follower.progress + 0.25 * k) for k in range(1, 9)])
+        rel = ahead - pose[:2]
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+
+
+def _depth_waypoints() -> object:
+    from song.runtime.depth_policy import DepthWaypoints
+
+    return DepthWaypoints()
+
+
 for _name, _factory in (("straight", StraightPolicy), ("astar", AStarPolicy), ("social", SocialPolicy),
-                        ("depth", _depth_policy)):  # fmt: skip
+                        ("depth", _depth_policy), ("astar_waypoints", AStarWaypoints),
+                        ("depth_waypoints", _depth_waypoints)):  # fmt: skip
     plugins.add("policy", _name, _factory)
 BASELINES = ("straight", "astar", "social", "depth")
 
@@ -232,13 +269,19 @@ BASELINES = ("straight", "astar", "social", "depth")
 def load_policy(name: str) -> Policy:
     """A ``policy`` plugin by name (a baseline, a registered plugin, ``module:Class`` or ``file.py:Class``).
 
-    The plugin is called with no arguments; the result must have ``reset(episode)`` and ``act(observation)``.
+    The plugin is called with no arguments; the result must have ``reset(episode)`` and ``act(observation)``,
+    or ``plan(observation)`` and ``rate_hz`` (a waypoint policy, returned wrapped in its tracker:
+    :mod:`song.runtime.waypoints`).
     """
     factory = plugins.lookup("policy", name)
     try:
         policy = factory()
     except Exception as exc:  # the user's __init__ failed: one line, naming the policy
         raise SongError(f"cannot create policy '{name}': {type(exc).__name__}: {exc}") from exc
+    from song.runtime.waypoints import PurePursuitTracker, is_waypoint_policy
+
+    if callable(getattr(policy, "reset", None)) and is_waypoint_policy(policy):
+        return PurePursuitTracker(policy)
     if not (callable(getattr(policy, "reset", None)) and callable(getattr(policy, "act", None))):
-        raise SongError(f"policy '{name}' must define reset(episode) and act(observation)")
+        raise SongError(f"policy '{name}' must define reset(episode) and act(observation) (or plan(observation))")
     return policy

@@ -18,6 +18,8 @@ Built in:
   (expected planar depth, 0 where nothing is seen), ``rgbd`` both. The camera (mount height, field of
   view, near/far) is the release's; the resolution is an option (default the recorded 960×540), and all
   camera sensors of a run share one render per step.
+- ``goal_image``: an image goal, ``{"rgb", "depth"}`` rendered once per episode at the goal pose (the
+  goal, facing along the last leg of the planned path, at the start time): the NoMaD protocol.
 """
 
 from __future__ import annotations
@@ -367,8 +369,47 @@ class RgbdSensor(CameraSensor):
         return {"rgb": out.rgb, "depth": np.minimum(out.depth, np.float32(self.params.camera.far_m))}
 
 
-CAMERA_SENSORS = ("rgb", "depth", "rgbd")
-for _sensor in (StateSensor, ScanSensor, PedestrianSensor, MapSensor, RgbSensor, DepthSensor, RgbdSensor):
+def goal_pose(episode: Episode) -> Pose:
+    """Where an image goal is taken: the goal, facing along the last leg of the episode's path."""
+    path = np.asarray(episode.path, dtype=np.float64).reshape(-1, 2)
+    points = np.vstack([episode.start_xy, path, episode.goal_xy])
+    legs = np.diff(points, axis=0)
+    moving = legs[np.linalg.norm(legs, axis=1) > 1e-6]
+    yaw = float(np.arctan2(moving[-1, 1], moving[-1, 0])) if len(moving) else float(episode.start_yaw)
+    return Pose(float(episode.goal_xy[0]), float(episode.goal_xy[1]), yaw)
+
+
+class GoalImageSensor(CameraSensor):
+    """An image goal (the paper's NoMaD protocol): colour and depth rendered at the goal pose.
+
+    The camera stands at the goal facing along the last leg of the planned path (:func:`goal_pose`), at
+    the episode's start time ``t0`` (the pedestrians where they are when the episode begins). Rendered
+    once per episode at ``reset`` and returned unchanged every step.
+    """
+
+    name = "goal_image"
+
+    @override
+    def space(self) -> dict[str, Box]:
+        return {"rgb": self._rgb_space(), "depth": self._depth_space()}
+
+    @override
+    def reset(self, episode: Episode) -> None:
+        super().reset(episode)
+        out = self.scene_view.render(goal_pose(episode), float(episode.t0), self.width, self.height)
+        depth = np.minimum(out.depth, np.float32(self.params.camera.far_m))
+        self._goal = {"rgb": out.rgb.copy(), "depth": depth.copy()}
+        for array in self._goal.values():
+            array.setflags(write=False)
+
+    @override
+    def observe(self, view: RobotView) -> dict[str, np.ndarray]:
+        return self._goal
+
+
+CAMERA_SENSORS = ("rgb", "depth", "rgbd", "goal_image")
+for _sensor in (StateSensor, ScanSensor, PedestrianSensor, MapSensor, RgbSensor, DepthSensor, RgbdSensor,
+                GoalImageSensor):  # fmt: skip
     plugins.add("sensor", _sensor.name, _sensor)
 
 
