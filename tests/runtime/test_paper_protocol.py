@@ -169,3 +169,45 @@ def test_the_env_and_collect_take_the_ablation_too(tmp_path: Path) -> None:
     summary = collect(str(GOLDEN), "straight", tmp_path / "ds", split="test", limit=1, keep="all", no_avatars=True)
     info = json.loads((Path(summary.out) / "meta" / "info.json").read_text())
     assert info["song"]["ablation"] == "no_avatars"
+
+
+@pytest.mark.parametrize("name", ["NavDPStandIn", "IPlannerStandIn", "ViNTStandIn", "NoMaDStandIn"])
+def test_each_published_profile_runs_end_to_end_through_eval(tmp_path: Path, name: str) -> None:
+    out = tmp_path / "eval"
+    args = ["eval", "--bench", str(GOLDEN), "--policy", f"tests/runtime/fake_models.py:{name}", "--out", str(out)]
+    options = ["--resolution", "64x48", "--limit", "1", "--render-backend", "numba", "--no-avatars"]  # people aside
+    result = CliRunner().invoke(app, [*args, *options])
+    assert result.exit_code == 0, result.output
+    (row,) = pq.read_table(next(out.glob("*.parquet"))).to_pylist()
+    assert row["outcome"] != "error", row["error"]
+    assert row["steps"] > 1 and row["length"] > 0.1  # the tracked waypoints moved the robot
+    summary = json.loads(next(out.glob("*.json")).read_text())
+    assert summary["policy_kind"] == "waypoints"
+
+
+def test_a_stand_in_refuses_the_wrong_image_size_colour_scale_or_depth_units() -> None:
+    from song.runtime.adapters import prepare_colour, prepare_depth, profiles
+    from tests.runtime.fake_models import StandInModel
+
+    navdp, nomad = StandInModel("navdp"), StandInModel("nomad")
+    p = profiles()["navdp"]
+    rgb = np.zeros((48, 64, 3), np.uint8)
+    rgb[..., 0] = 200  # red
+    colour = prepare_colour(rgb, p)
+    assert colour.shape == (224, 224, 3) and colour[..., 2].max() == 200 and colour[..., 0].max() == 0  # BGR
+    depth = prepare_depth(np.full((48, 64), 2.0, np.float32), p)
+    good = {"context": np.stack([colour] * 8), "depth": np.stack([depth] * 8), "goal": np.array([3.0, 1.0], np.float32)}
+    assert navdp(good).shape == (24, 2)
+    with pytest.raises(ValueError, match="units"):
+        navdp({**good, "depth": good["depth"] * 1000.0})
+    with pytest.raises(ValueError, match="float32"):
+        navdp({**good, "context": good["context"][:, :100]})
+    q = profiles()["nomad"]
+    frame = prepare_colour(rgb, q)
+    assert frame.shape == (96, 96, 3) and -2.2 <= frame.min() and frame.max() <= 2.7  # ImageNet-normalised RGB
+    with pytest.raises(ValueError, match="ImageNet"):
+        nomad({"context": np.full((4, 96, 96, 3), 200.0, np.float32), "goal_image": frame})
+    with pytest.raises(SongError, match="expected"):
+        from song.runtime.adapters import decode
+
+        decode(np.zeros((5, 2)), q)
