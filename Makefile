@@ -19,6 +19,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[all,dev]'
 	# third-party reference implementations for tests/benchmarks; their extra deps are not needed
 	$(PY) -m pip install --quiet --no-deps pyrvo==0.4.3 pynavmesh==1.2.5
+	# headless Chromium for the teleoperation page's browser test (Debian's packages; skipped with a reason elsewhere)
+	command -v chromium >/dev/null || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && \
+		(apt-get install -y -q chromium chromium-driver >/dev/null 2>&1 || \
+		 (apt-get update -q >/dev/null 2>&1 && apt-get install -y -q chromium chromium-driver >/dev/null 2>&1)); } || \
+		echo "chromium not installed: the teleoperation browser test will be skipped"
 	touch $(STAMP)
 
 setup: $(STAMP)

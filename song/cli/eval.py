@@ -164,3 +164,33 @@ def collect_command(
         f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "
         f"{summary.frames} steps"
     )
+
+
+@app.command("teleop")
+@handle_errors
+def teleop_command(
+    bench: str = typer.Option(..., "--bench", help="benchmark folder, DIR@X.Y.Z, or a release folder"),
+    episode: list[str] | None = typer.Option(None, "--episode", help="drive this episode (repeatable)"),
+    split: str = typer.Option("test", "--split", help="without --episode: every episode of this split"),
+    out: Path = typer.Option(Path("runs/teleop"), "--out", help="results (human.*) and the LeRobot dataset/"),
+    resolution: str | None = typer.Option(
+        None,
+        "--resolution",
+        metavar="WxH",
+        help="camera size (default: the largest of 320x240, 240x180, 160x120 that renders in time here)",
+    ),  # fmt: skip
+    port: int = typer.Option(0, "--port", min=0, max=65535, help="port on 127.0.0.1 (0: any free port)"),
+) -> None:
+    """Drive the robot yourself from a browser page: the human upper bound, scored and recorded."""
+    from song.runtime.teleop import run_teleop
+
+    size = parse_size(resolution, "--resolution") if resolution else None
+
+    def ready(url: str) -> None:
+        console.print(f"open [bold]{url}[/bold] in a browser on this machine (W/A/S/D or the arrow keys drive)")
+
+    summary = run_teleop(bench, out, episode or None, split, size, port, ready)
+    from song.runtime.metrics import markdown_table
+
+    typer.echo(markdown_table({"human": summary["metrics"]}))
+    console.print(f"results in {out}/human.json, demonstrations in {out}/dataset")

@@ -190,21 +190,33 @@ class _Recorder:
 
 
 def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:  # noqa: B006 - per-process cache
-    """Roll one episode out with :func:`run_episode`, recording every step.
-
-    Per step: the observation before acting, the executed action and the reward terms (the Gymnasium
-    env's, :func:`song.runtime.env.reward_terms`).
-    """
+    """Roll one episode out (:func:`record_rollout`) with the job's policy."""
     if job.bench not in cache:
         cache[job.bench] = open_benchmark(job.bench)
     bench = cache[job.bench]
     episode = dataclasses.replace(bench.episode(job.episode_id), params=bench.params)
     if job.no_avatars:
         episode = without_avatars(episode)
-    recorder = _Recorder(load_policy(job.policy))
-    names = tuple(dict.fromkeys([*policy_sensors(recorder.policy), *job.sensors]))
-    suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, {"camera": dict(job.camera)})
-    plans = plan_features(suite, job.sensors, float(bench.params.robot.control_hz))
+    return record_rollout(bench, episode, load_policy(job.policy), job.sensors, job.camera, job.step_timeout_s)[0]
+
+
+def record_rollout(
+    bench: Any,
+    episode: Any,
+    policy: Any,
+    sensors: tuple[str, ...],
+    camera: dict[str, Any],
+    step_timeout_s: float | None = DEFAULT_STEP_TIMEOUT_S,
+) -> tuple[dict[str, Any], Any]:
+    """Run ``policy`` on ``episode`` with :func:`run_episode`, recording every step; (record, result).
+
+    Per step: the observation before acting, the executed action and the reward terms (the Gymnasium
+    env's, :func:`song.runtime.env.reward_terms`). The record is what :func:`write_dataset` writes.
+    """
+    recorder = _Recorder(policy)
+    names = tuple(dict.fromkeys([*policy_sensors(policy), *sensors]))
+    suite = SensorSuite.build(names, bench.params, bench.max_pedestrians, {"camera": dict(camera)})
+    plans = plan_features(suite, sensors, float(bench.params.robot.control_hz))
     steps: dict[str, list] = {k: [] for k in (*(p.key for p in plans), "action", "progress", "terminal")}
 
     def record(runner: EpisodeRunner) -> None:
@@ -217,14 +229,18 @@ def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:
         for plan in plans:
             steps[plan.key].append(plan.extract(obs))
 
-    result = run_episode(episode, recorder, make_collider(episode), suite, record, job.step_timeout_s)
-    out: dict[str, Any] = {"episode_id": job.episode_id, "difficulty": episode.difficulty, "outcome": result.outcome}
+    result = run_episode(episode, recorder, make_collider(episode), suite, record, step_timeout_s)
+    out: dict[str, Any] = {
+        "episode_id": episode.episode_id,
+        "difficulty": episode.difficulty,
+        "outcome": result.outcome,
+    }
     for name, values in steps.items():
         if values:
             out[name] = np.stack(values)
     out["steps"] = len(steps["action"])
     out["plans"] = plans
-    return out
+    return out, result
 
 
 def _table(episode: dict[str, Any], episode_index: int, first_index: int, fps: float):
@@ -336,17 +352,27 @@ def collect(
         done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
         rollouts = [done[e.episode_id] for e in episodes]  # in release order, whatever the workers
         kept = [r for r in rollouts if r["steps"] and (keep == "all" or r["outcome"] == "success")]
-        written = _write_episodes(partial, kept, fps)
         successes = sum(r["outcome"] == "success" for r in rollouts)
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
                  "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
                  "release_check": bench.integrity or "ok", "ablation": "no_avatars" if no_avatars else None}  # fmt: skip
-        _write_meta(partial, kept, written, fps, split, about)
-        for name in ("data", "videos", "meta"):  # the dataset appears complete, meta (its index) last
-            if (partial / name).exists():
-                os.replace(partial / name, out / name)
-        partial.rmdir()
-        return CollectSummary(out, len(kept), written["frames"], successes, len(rollouts))
+        frames = write_dataset(out, kept, fps, split, about)
+        return CollectSummary(out, len(kept), frames, successes, len(rollouts))
+
+
+def write_dataset(out: Path, kept: list[dict[str, Any]], fps: float, split: str, about: dict[str, Any]) -> int:
+    """Write recorded rollouts as a LeRobot dataset in ``out`` (built in ``out/.partial``, then moved in).
+
+    The caller holds ``out``'s lock. Returns the number of frames written.
+    """
+    partial = out / PARTIAL_DIR
+    written = _write_episodes(partial, kept, fps)
+    _write_meta(partial, kept, written, fps, split, about)
+    for name in ("data", "videos", "meta"):  # the dataset appears complete, meta (its index) last
+        if (partial / name).exists():
+            os.replace(partial / name, out / name)
+    partial.rmdir()
+    return written["frames"]
 
 
 def _refuse_non_empty(out: Path) -> None:
