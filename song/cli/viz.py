@@ -160,3 +160,23 @@ def avatar(
 
         written.append(render_gallery(assets, gallery))
     _report(written)
+
+
+@viz_app.command("results")
+@handle_errors
+def results_page(
+    positional: str | None = BenchArgument,
+    bench: str | None = BenchOption,
+    results: Path = typer.Option(..., "--results", help=RESULTS_HELP),
+    out: Path = typer.Option(Path("runs/viz/results"), "--out", help="output folder (index.html and the videos)"),
+    videos: int = typer.Option(12, "--videos", min=0, help="first-person videos for the first N episodes"),
+    resolution: str = typer.Option("320x240", "--resolution", metavar="WxH", help="video camera size, px"),
+    backend: str = typer.Option("auto", "--render-backend", help="auto | numba | gsplat | a render_backend plugin"),
+) -> None:
+    """An HTML page of one policy's results, each episode linked to its first-person video."""
+    from song.cli.common import parse_size
+    from song.viz.results import render_results_page
+
+    size = parse_size(resolution, "--resolution")
+    location = bench_location(positional, bench)
+    _report(render_results_page(location, eval_results(results, ".parquet"), out, videos, size, backend))
