@@ -4,7 +4,10 @@
 five-tuple; ``terminated`` is True on success or a collision failure, ``truncated`` on the step
 limit. Randomness (which episode when none is named) comes from ``self.np_random``. Observations are
 a dict with one entry per selected sensor (:mod:`song.runtime.sensors`), and the robot's limits come
-from the release. The env id carries the benchmark format's major version: ``song/SongNav-v1``.
+from the release. The env id carries the benchmark format's major version: ``song/SongNav-v1``; it is
+registered when this module is imported, so ``gym.make("song.runtime.env:song/SongNav-v1", bench=...)``
+works on its own. :func:`make` adds the release's step limit as ``max_episode_steps``;
+:func:`make_vector` makes a Gymnasium vector env of several copies.
 """
 
 from __future__ import annotations
@@ -50,11 +53,16 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         sensor_options: per-sensor keyword options.
         allow_modified: use a release edited since export.
         no_avatars: the avatar-free ablation: episodes without pedestrians (neither rendered nor colliding).
+        resolution: (width, height) of the camera sensors (default: the release's, 960×540).
+        render_backend: the renderer of the camera sensors (``auto``, ``numba``, ``gsplat``, ...).
+        render_mode: ``"rgb_array"``: :meth:`render` returns the first-person RGB | depth | top-down map
+            picture of ``song viz pov``; None renders nothing.
 
-    Observation: ``{sensor name: output}``; action: Box [v, ω] within the robot's limits.
+    Observation: ``{sensor name: output}``; action: Box [v, ω] within the robot's limits. Episodes end
+    at the release's step limit (``truncated``); :func:`make` also registers it as ``max_episode_steps``.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(
         self,
@@ -66,14 +74,28 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         sensor_options: dict[str, dict] | None = None,
         allow_modified: bool = False,
         no_avatars: bool = False,
+        resolution: tuple[int, int] | None = None,
+        render_backend: str = "auto",
+        render_mode: str | None = None,
     ) -> None:
         _require_gym()
         from gymnasium import spaces
 
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode {render_mode!r}: use one of {self.metadata['render_modes']} or None")
+        self.render_mode = render_mode
         self.bench = open_benchmark(bench, version)
         self.bench.require_intact(allow_modified)  # a release edited after export is refused
         self.params = params or self.bench.params
-        self.sensors = SensorSuite.build(sensors, self.params, self.bench.max_pedestrians, sensor_options)
+        options = {name: dict(values) for name, values in (sensor_options or {}).items()}
+        camera = options.setdefault("camera", {})
+        camera.setdefault("backend", render_backend)
+        if resolution is not None:
+            camera.update(width=int(resolution[0]), height=int(resolution[1]))
+        self.camera = dict(camera)
+        self.sensors = SensorSuite.build(sensors, self.params, self.bench.max_pedestrians, options)
+        self.metadata = {**self.metadata, "render_fps": float(self.params.robot.control_hz)}
+        self._pictures = None
         self.episode_ids = [e.episode_id for e in self.bench.episodes(difficulty=difficulty)]
         robot = self.params.robot
         max_w = np.deg2rad(robot.max_yaw_rate_deg_s)
@@ -85,6 +107,16 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         self.observation_space = to_gym_space(self.sensors.space())
         self.runner: EpisodeRunner | None = None
         self.no_avatars = no_avatars
+
+    def render(self):
+        """The current view as ``song viz pov`` draws it: RGB | depth | top-down map (``rgb_array``)."""
+        if self.render_mode is None or self.runner is None:
+            return None
+        if self._pictures is None:
+            from song.viz.pov import PovPictures
+
+            self._pictures = PovPictures(self.params, self.bench.max_pedestrians, self.camera)
+        return self._pictures.frame(self.runner, self.runner.observation())
 
     def _info(self) -> dict[str, Any]:
         runner = self.runner
@@ -137,7 +169,46 @@ def reward_terms(previous_m: float, distance_m: float, outcome: str | None) -> t
 
 
 def register() -> None:
-    """Register :data:`ENV_ID` with Gymnasium (idempotent)."""
+    """Register :data:`ENV_ID` with Gymnasium (idempotent; Gymnasium calls it through its entry points)."""
     _require_gym()
     if ENV_ID not in gym.registry:
         gym.register(id=ENV_ID, entry_point="song.runtime.env:SongNavEnv")
+
+
+def make(bench: str, **kwargs: Any):
+    """``gym.make(ENV_ID, bench=...)`` with the release's step limit as ``max_episode_steps``."""
+    _require_gym()
+    register()
+    limit = open_benchmark(bench, kwargs.get("version")).params.robot.max_steps
+    return gym.make(ENV_ID, bench=bench, max_episode_steps=limit, **kwargs)
+
+
+def _make_in_worker(bench: str, threads: int, **kwargs: Any):
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    return make(bench, **kwargs)
+
+
+def make_vector(bench: str, num_envs: int, asynchronous: bool = True, **kwargs: Any):
+    """``num_envs`` copies of the env as a Gymnasium vector env (one process each when ``asynchronous``).
+
+    Each copy draws its own episodes from its own seed; the vector env resets a copy when it ends.
+    Worker processes are spawned, not forked (numba's OpenMP threads make a forked child abort), and
+    each renders with its share of the machine's cores, so the copies do not oversubscribe them.
+    """
+    _require_gym()
+    import os
+    from functools import partial
+
+    if asynchronous:
+        threads = max(1, (os.cpu_count() or 1) // num_envs)
+        return gym.vector.AsyncVectorEnv(
+            [partial(_make_in_worker, bench, threads, **kwargs) for _ in range(num_envs)], context="spawn"
+        )
+    factories = [partial(make, bench, **kwargs) for _ in range(num_envs)]
+    return gym.vector.SyncVectorEnv(factories)
+
+
+if gym is not None:  # so gym.make("song.runtime.env:song/SongNav-v1", ...) works with nothing else imported
+    register()

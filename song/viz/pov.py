@@ -83,6 +83,44 @@ def _pad_to(image: np.ndarray, width: int) -> np.ndarray:
     return np.concatenate([image, pad], axis=1)
 
 
+class PovPictures:
+    """Frames of RGB | depth | top-down map for a running episode (``song viz pov``, the env's ``render``).
+
+    Args:
+        params: the runtime parameters (camera and robot).
+        max_pedestrians: the release's largest scene (sensor capacity).
+        camera: the camera sensors' options (``width``, ``height``, ``backend``, ``model``).
+    """
+
+    def __init__(self, params, max_pedestrians: int, camera: dict) -> None:
+        self.sensors = SensorSuite.build(("rgb", "depth"), params, max_pedestrians, {"camera": dict(camera)})
+        self.fov = params.camera.hfov_deg
+        self._episode = None
+
+    def _start(self, episode) -> None:
+        self._episode = episode
+        self.sensors.reset(episode)
+        sm = episode.static_map
+        self.canvas = map_canvas(sm.cells, sm.resolution, sm.origin, max_pixels=PANEL_HEIGHT * 2)
+        self.map_width = round(self.canvas.image.shape[1] * PANEL_HEIGHT / self.canvas.image.shape[0])
+
+    def frame(self, runner: EpisodeRunner, observation: dict | None = None) -> np.ndarray:
+        """(PANEL_HEIGHT, W, 3) uint8 picture of the runner's current step.
+
+        ``observation`` holding ``rgb`` and ``depth`` (the runner's own) is used instead of rendering again.
+        """
+        if runner.episode is not self._episode:
+            self._start(runner.episode)
+        if observation is not None and "rgb" in observation and "depth" in observation:
+            obs = observation
+        else:
+            obs = self.sensors.observe(runner.view())
+        panels = [_fit(obs["rgb"], PANEL_HEIGHT), _fit(depth_image(obs["depth"]), PANEL_HEIGHT)]
+        map_panel = _fit(_map_panel(self.canvas, runner, self.fov), PANEL_HEIGHT)
+        panels.append(_pad_to(map_panel, min(self.map_width, 2 * PANEL_HEIGHT)))
+        return np.concatenate(panels, axis=1)
+
+
 def render_pov(
     bench: str,
     episode_id: str,
@@ -94,20 +132,15 @@ def render_pov(
     """Run ``policy`` on the episode and write ``<episode>_<policy>_pov.mp4`` and ``..._pov.png``."""
     release = open_benchmark(bench)
     width, height = size
-    setup = make_setup(release, policy, ["rgb", "depth"], camera={"width": width, "height": height, "backend": backend})
+    camera = {"width": width, "height": height, "backend": backend}
+    setup = make_setup(release, policy, ["rgb", "depth"], camera=camera)
     episode = dataclasses.replace(release.episode(episode_id), params=setup.params)
     sensors = SensorSuite.build(setup.sensors, setup.params, release.max_pedestrians, setup.sensor_options)
-    sm = episode.static_map
-    canvas = map_canvas(sm.cells, sm.resolution, sm.origin, max_pixels=PANEL_HEIGHT * 2)
-    map_width = round(canvas.image.shape[1] * PANEL_HEIGHT / canvas.image.shape[0])
-    fov = setup.params.camera.hfov_deg
+    pictures = PovPictures(setup.params, release.max_pedestrians, setup.sensor_options["camera"])
     frames: list[np.ndarray] = []
 
     def grab(runner: EpisodeRunner) -> None:
-        obs = runner.observation()
-        panels = [_fit(obs["rgb"], PANEL_HEIGHT), _fit(depth_image(obs["depth"]), PANEL_HEIGHT)]
-        panels.append(_pad_to(_fit(_map_panel(canvas, runner, fov), PANEL_HEIGHT), min(map_width, 2 * PANEL_HEIGHT)))
-        frame = np.concatenate(panels, axis=1)
+        frame = pictures.frame(runner, runner.observation())
         label(frame, f"{episode_id} {policy} t = {runner.time - episode.t0:5.1f} s", (10, 22), (0, 0, 0), 0.6)
         frames.append(frame)
 

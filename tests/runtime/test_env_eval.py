@@ -153,3 +153,40 @@ def test_eval_outcomes_and_cli(tmp_path: Path) -> None:
     again = tmp_path / "again"
     CliRunner().invoke(app, ["eval", "--bench", str(GOLDEN), "--policy", "astar", "--out", str(again), "-j", "2"])
     assert (again / "astar.parquet").read_bytes() == (out / "astar.parquet").read_bytes()
+
+
+def test_render_mode_camera_size_and_the_step_limit_through_gym_make() -> None:
+    gym = pytest.importorskip("gymnasium")
+    from gymnasium.utils.env_checker import check_env
+
+    from song.runtime.env import ENV_ID, make
+
+    env = gym.make(f"song.runtime.env:{ENV_ID}", bench=str(GOLDEN), sensors=("state", "rgb"), resolution=(40, 30),
+                   render_mode="rgb_array", render_backend="numba")  # fmt: skip
+    check_env(env.unwrapped)  # the render check included
+    obs, _ = env.reset(seed=0)
+    assert obs["rgb"].shape == (30, 40, 3)
+    picture = env.render()
+    assert picture.dtype == np.uint8 and picture.ndim == 3 and picture.shape[1] > 2 * picture.shape[0]  # RGB|depth|map
+    limited = make(str(GOLDEN), sensors=("state",))
+    assert limited.spec.max_episode_steps == open_benchmark(GOLDEN).params.robot.max_steps
+    from song.runtime.env import SongNavEnv
+
+    with pytest.raises(ValueError, match="render_mode"):
+        SongNavEnv(str(GOLDEN), render_mode="ansi")
+
+
+def test_a_vector_env_of_spawned_copies() -> None:
+    pytest.importorskip("gymnasium")
+    from song.runtime.env import make_vector
+
+    vector = make_vector(str(GOLDEN), 2, sensors=("state", "scan"))
+    try:
+        obs, info = vector.reset(seed=[1, 2])
+        assert obs["scan"].shape == (2, 72) and len(info["episode_id"]) == 2
+        assert vector.single_observation_space["scan"].shape == (72,)
+        for _ in range(5):
+            obs, reward, terminated, truncated, info = vector.step(np.tile([0.3, 0.0], (2, 1)).astype(np.float32))
+        assert reward.shape == (2,) and obs["state"]["pose"].shape == (2, 3)
+    finally:
+        vector.close()
