@@ -8,6 +8,7 @@ up and down). The same dressing gives the Gaussians, so the two agree.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -56,6 +57,10 @@ def flat(name: str, polygon, z: float, up: bool) -> ProxyMesh:
     return ProxyMesh(name, np.column_stack([xy, np.full(len(xy), z)]), tris if up else tris[:, ::-1])
 
 
+def _labelled(mesh: ProxyMesh, material: str | None, label: str | None, convex: bool = False) -> ProxyMesh:
+    return dataclasses.replace(mesh, material=material, label=label, convex=convex)
+
+
 def part_mesh(part: Part) -> ProxyMesh:
     """The closed mesh of one part."""
     c, s = math.cos(part.yaw), math.sin(part.yaw)
@@ -97,19 +102,54 @@ def part_mesh(part: Part) -> ProxyMesh:
     return ProxyMesh(part.name, vertices, np.array(faces, dtype=np.int64))
 
 
-def dressing_meshes(dressing: Dressing) -> tuple[list[ProxyMesh], list[ProxyMesh]]:
-    """``(solids, surfaces)``: walls and parts (obstacles); floor, ceiling and entrance doors (seen only)."""
+GROUP_LABELS = {"lintel": "door_frame", "frame": "door_frame", "door": "door"}
+
+
+def dressing_meshes(
+    dressing: Dressing, categories: dict[str, str] | None = None
+) -> tuple[list[ProxyMesh], list[ProxyMesh]]:
+    """``(solids, surfaces)``: walls and parts (obstacles); floor, ceiling and entrance doors (seen only).
+
+    Each mesh carries its material and semantic class: ``wall``, ``floor``, ``ceiling``, ``door``,
+    ``door_frame``, or the category of the object a part belongs to (``categories``: object id →
+    category, the semantic map's); parts are convex, walls are not.
+    """
     from song.geometry.navmesh import trace_legal
 
-    solids = [extrude(f"wall_{k}", poly, 0.0, dressing.ceiling_height) for k, poly in enumerate(dressing.walls)]
-    solids += [part_mesh(part) for part in dressing.parts if part.group != "door"]
+    categories = categories or {}
+    solids = [
+        _labelled(extrude(f"wall_{k}", poly, 0.0, dressing.ceiling_height), dressing.wall_material, "wall")
+        for k, poly in enumerate(dressing.walls)
+    ]
+
+    def labelled_part(part: Part) -> ProxyMesh:
+        label = GROUP_LABELS.get(part.group) or categories.get(part.group)
+        return _labelled(part_mesh(part), part.material, label, convex=True)
+
+    solids += [labelled_part(part) for part in dressing.parts if part.group != "door"]
     grid = dressing.grid
-    surfaces = [part_mesh(part) for part in dressing.parts if part.group == "door"]
+    surfaces = [labelled_part(part) for part in dressing.parts if part.group == "door"]
     for k, poly in enumerate(trace_legal(dressing.floor_mask, grid.resolution, grid.origin)):
         from shapely.geometry.polygon import orient
 
         poly = orient(poly.simplify(0.5 * grid.resolution, preserve_topology=True), 1.0)
         if poly.geom_type != "Polygon" or poly.area <= grid.resolution**2:
             continue
-        surfaces += [flat(f"floor_{k}", poly, 0.0, True), flat(f"ceiling_{k}", poly, dressing.ceiling_height, False)]
+        surfaces += [
+            _labelled(flat(f"floor_{k}", poly, 0.0, True), dressing.default_floor, "floor"),
+            _labelled(flat(f"ceiling_{k}", poly, dressing.ceiling_height, False), "ceiling", "ceiling"),
+        ]
     return solids, surfaces
+
+
+def room_meshes(semantic_map) -> list[ProxyMesh]:
+    """One flat mesh per region of a semantic map, labelled with the region's type."""
+    from shapely.geometry import Polygon
+    from shapely.geometry.polygon import orient
+
+    rooms = []
+    for region in semantic_map.regions:
+        polygon = orient(Polygon(region.polygon), 1.0)
+        if polygon.is_valid and polygon.area > 0:
+            rooms.append(_labelled(flat(f"room_{region.id}", polygon, 0.0, True), None, region.type))
+    return rooms

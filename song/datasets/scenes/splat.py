@@ -369,12 +369,14 @@ class DressResult:
 def write_proxy(root: str | Path, hints: DressingHints) -> None:
     """Write only the package's USD proxy (with ``hints`` in its metadata) from its dressing."""
     from song.datasets.scenes.package import USD_PROXY, load_scene_package
-    from song.datasets.scenes.proxy import dressing_meshes
+    from song.datasets.scenes.proxy import dressing_meshes, room_meshes
     from song.datasets.scenes.usd import write_usd_proxy
 
     package = load_scene_package(root, min_free_area_m2=0.0)
-    solids, surfaces = dressing_meshes(build_dressing(package.semantic_map, package.occupancy, hints))
-    write_usd_proxy(Path(root) / USD_PROXY, solids, surfaces, hints.to_json())
+    dressing = build_dressing(package.semantic_map, package.occupancy, hints)
+    solids, surfaces = dressing_meshes(dressing, {o.id: o.category for o in package.semantic_map.objects})
+    rooms = room_meshes(package.semantic_map)
+    write_usd_proxy(Path(root) / USD_PROXY, solids, surfaces, hints.to_json(), rooms)
 
 
 def _check_splat_count(root: Path, package, spacing: float) -> None:
@@ -402,7 +404,7 @@ def dress_package(
     """
     from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, load_scene_package
     from song.datasets.scenes.ply import write_compressed_ply
-    from song.datasets.scenes.proxy import dressing_meshes
+    from song.datasets.scenes.proxy import dressing_meshes, room_meshes
     from song.datasets.scenes.usd import read_usd_dressing, write_usd_proxy
 
     root = Path(root)
@@ -417,8 +419,8 @@ def dress_package(
     dressing = build_dressing(package.semantic_map, package.occupancy, hints)
     cloud = synthesize_gaussians(dressing, spacing)
     write_compressed_ply(root / GAUSSIANS, cloud)
-    solids, surfaces = dressing_meshes(dressing)
-    write_usd_proxy(root / USD_PROXY, solids, surfaces, hints.to_json())
+    solids, surfaces = dressing_meshes(dressing, {o.id: o.category for o in package.semantic_map.objects})
+    write_usd_proxy(root / USD_PROXY, solids, surfaces, hints.to_json(), room_meshes(package.semantic_map))
     return DressResult(
         package.scene_id, len(cloud), (root / GAUSSIANS).stat().st_size / 1e6, (root / USD_PROXY).stat().st_size / 1e3
     )

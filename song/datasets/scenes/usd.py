@@ -1,7 +1,15 @@
 """USD proxy ``scene_flat.usda``: Z-up, metres.
 
 ``/World/collision`` holds the obstacles as ``UsdGeom.Mesh`` prims -- walls, furniture parts, lintels --
-each a closed solid; ``/World/surfaces`` holds the floor and the ceiling (flat meshes). A
+each a closed solid; ``/World/surfaces`` holds the floor and the ceiling (flat meshes). For simulators
+(Isaac Sim / Isaac Lab read it as it is): every obstacle is a static collider (``UsdPhysics.CollisionAPI``,
+no rigid body; convex parts approximated by their convex hull, walls -- not convex -- as triangle
+meshes), ``/World/physicsScene`` sets gravity along -Z, every mesh with a known material is bound to a
+``UsdPreviewSurface`` under ``/World/Looks`` whose diffuse colour is the material's base albedo (the
+colour the Gaussians are textured around) converted to linear, and every mesh with a known class
+carries ``UsdSemantics.LabelsAPI`` labels (taxonomy ``class``: the semantic map's category, ``wall``,
+``floor``, ``ceiling``, ``door``). ``/World/rooms`` holds one flat, unrendered (purpose ``guide``) mesh per
+semantic-map region labelled with its room type. A
 :class:`ProxyBox` (a vertical prism over a CCW footprint) becomes 8 points and 12 triangles; any other
 solid comes as a :class:`ProxyMesh`. The layer's ``customLayerData`` may carry ``song_dressing``: the
 JSON of :class:`song.datasets.scenes.dressing.DressingHints` (what the scene's source knew: openings,
@@ -59,11 +67,18 @@ class ProxyBox:
 
 @dataclass(frozen=True)
 class ProxyMesh:
-    """A mesh read back from the proxy: name, vertices (V, 3) float64, triangle faces (F, 3) int."""
+    """A mesh: name, vertices (V, 3) float64, triangle faces (F, 3) int.
+
+    ``material`` (a :data:`song.datasets.scenes.materials.MATERIALS` name or ``paint:#rrggbb``), ``label``
+    (a semantic class) and ``convex`` are written to the proxy when given; meshes read back carry none.
+    """
 
     name: str
     vertices: np.ndarray
     faces: np.ndarray
+    material: str | None = None
+    label: str | None = None
+    convex: bool = False
 
 
 def _pxr():
@@ -102,7 +117,7 @@ def box_mesh(index: int, box: ProxyBox) -> ProxyMesh:
     return ProxyMesh(box.name, points, PRISM_FACES.copy())
 
 
-def _define_mesh(stage, UsdGeom, Vt, prim_path: str, mesh: ProxyMesh) -> None:
+def _define_mesh(stage, UsdGeom, Vt, prim_path: str, mesh: ProxyMesh):
     points = np.asarray(mesh.vertices, dtype=np.float32)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     if len(points) == 0 or not np.isfinite(points).all() or len(faces) == 0:
@@ -113,6 +128,55 @@ def _define_mesh(stage, UsdGeom, Vt, prim_path: str, mesh: ProxyMesh) -> None:
     prim.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
     prim.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     prim.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([points.min(axis=0), points.max(axis=0)])))
+    return prim
+
+
+def _srgb_to_linear(c: float) -> float:
+    return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+
+
+class _Decorator:
+    """Binds materials (one ``UsdPreviewSurface`` per name, made on first use) and semantic labels."""
+
+    def __init__(self, stage) -> None:
+        self.stage = stage
+        self.looks: dict[str, object] = {}
+
+    def material(self, name: str):
+        from pxr import Gf, Sdf, UsdShade
+
+        from song.datasets.scenes.materials import material_of
+
+        if name not in self.looks:
+            if not self.looks:
+                self.stage.DefinePrim("/World/Looks", "Scope")
+            path = f"/World/Looks/{_identifier(name, set())}"
+            look = UsdShade.Material.Define(self.stage, path)
+            shader = UsdShade.Shader.Define(self.stage, f"{path}/surface")
+            shader.CreateIdAttr("UsdPreviewSurface")
+            albedo = material_of(name)
+            shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(
+                Gf.Vec3f(*(_srgb_to_linear(c) for c in albedo.base))
+            )
+            metal = albedo.texture == "metal"
+            shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.4 if metal else 0.8)
+            shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+            look.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            self.looks[name] = look
+        return self.looks[name]
+
+    def decorate(self, prim, mesh: ProxyMesh, collider: bool) -> None:
+        from pxr import UsdPhysics, UsdSemantics, UsdShade
+
+        usd_prim = prim.GetPrim()
+        if collider:
+            UsdPhysics.CollisionAPI.Apply(usd_prim)
+            approximation = UsdPhysics.Tokens.convexHull if mesh.convex else UsdPhysics.Tokens.none
+            UsdPhysics.MeshCollisionAPI.Apply(usd_prim).CreateApproximationAttr(approximation)
+        if mesh.material:
+            UsdShade.MaterialBindingAPI.Apply(usd_prim).Bind(self.material(mesh.material))
+        if mesh.label:
+            UsdSemantics.LabelsAPI.Apply(usd_prim, "class").CreateLabelsAttr([mesh.label])
 
 
 def write_usd_proxy(
@@ -120,6 +184,7 @@ def write_usd_proxy(
     solids: list[ProxyBox | ProxyMesh],
     surfaces: list[ProxyMesh] = (),
     dressing_json: str | None = None,
+    rooms: list[ProxyMesh] = (),
 ) -> None:
     """Write ``scene_flat.usda`` (metersPerUnit 1, upAxis Z), atomically.
 
@@ -131,6 +196,7 @@ def write_usd_proxy(
         path: the file to write.
         solids: obstacles (``/World/collision``): boxes or closed meshes.
         surfaces: floor and ceiling meshes (``/World/surfaces``).
+        rooms: one flat labelled mesh per room (``/World/rooms``, purpose ``guide``).
         dressing_json: :class:`~song.datasets.scenes.dressing.DressingHints` JSON for the layer metadata.
 
     Raises:
@@ -145,15 +211,29 @@ def write_usd_proxy(
     stage.SetDefaultPrim(world.GetPrim())
     if dressing_json is not None:
         stage.GetRootLayer().customLayerData = {DRESSING_KEY: dressing_json}
+    from pxr import Gf, UsdPhysics
+
+    physics = UsdPhysics.Scene.Define(stage, "/World/physicsScene")
+    physics.CreateGravityDirectionAttr(Gf.Vec3f(0.0, 0.0, -1.0))
+    physics.CreateGravityMagnitudeAttr(9.81)
+    decorator = _Decorator(stage)
     UsdGeom.Scope.Define(stage, "/World/collision")
     used: set[str] = set()
     for index, solid in enumerate(solids):
         mesh = box_mesh(index, solid) if isinstance(solid, ProxyBox) else solid
-        _define_mesh(stage, UsdGeom, Vt, f"/World/collision/{_identifier(mesh.name, used)}", mesh)
+        prim = _define_mesh(stage, UsdGeom, Vt, f"/World/collision/{_identifier(mesh.name, used)}", mesh)
+        decorator.decorate(prim, mesh, collider=True)
     if surfaces:
         UsdGeom.Scope.Define(stage, "/World/surfaces")
         for mesh in surfaces:
-            _define_mesh(stage, UsdGeom, Vt, f"/World/surfaces/{_identifier(mesh.name, used)}", mesh)
+            prim = _define_mesh(stage, UsdGeom, Vt, f"/World/surfaces/{_identifier(mesh.name, used)}", mesh)
+            decorator.decorate(prim, mesh, collider=False)
+    if rooms:
+        UsdGeom.Scope.Define(stage, "/World/rooms")
+        for mesh in rooms:
+            prim = _define_mesh(stage, UsdGeom, Vt, f"/World/rooms/{_identifier(mesh.name, used)}", mesh)
+            prim.CreatePurposeAttr(UsdGeom.Tokens.guide)
+            decorator.decorate(prim, mesh, collider=False)
     text = stage.GetRootLayer().ExportToString()
     text = re.sub(r'\n    doc = "[^"]*"\n', "\n", text)  # no tool banner: bytes depend on the inputs only
     write_text_atomic(path, text)

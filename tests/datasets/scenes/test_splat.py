@@ -248,3 +248,38 @@ def test_splat_out_never_copies_through_a_symbolic_link(make_scene, tmp_path) ->
     result = CliRunner().invoke(app, ["scenes", "splat", str(root.parent), "--out", str(out)])
     assert result.exit_code != 0 and "symbolic link" in " ".join(result.output.split())
     assert not any(p.is_file() and p.read_bytes() == b"not yours" for p in out.rglob("*")) if out.exists() else True
+
+
+def test_usd_proxy_is_ready_for_a_simulator(office: Path) -> None:
+    """Static colliders, gravity along -Z, albedo materials and semantic classes per object and room."""
+    from pxr import Usd, UsdGeom, UsdPhysics, UsdSemantics, UsdShade
+
+    from song.datasets.scenes.materials import material_of
+
+    stage = Usd.Stage.Open(str(office / USD_PROXY))
+    assert UsdGeom.GetStageUpAxis(stage) == "Z" and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    scene = UsdPhysics.Scene(stage.GetPrimAtPath("/World/physicsScene"))
+    assert tuple(scene.GetGravityDirectionAttr().Get()) == (0.0, 0.0, -1.0)
+    package = load_scene_package(office)
+    categories = {o.category for o in package.semantic_map.objects}
+    labels = set()
+    for prim in stage.GetPrimAtPath("/World/collision").GetChildren():
+        assert prim.HasAPI(UsdPhysics.CollisionAPI) and not prim.HasAPI(UsdPhysics.RigidBodyAPI)  # static
+        approximation = UsdPhysics.MeshCollisionAPI(prim).GetApproximationAttr().Get()
+        assert approximation == ("none" if prim.GetName().startswith("wall") else "convexHull")
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        shader = UsdShade.Shader(stage.GetPrimAtPath(f"{material.GetPath()}/surface"))
+        colour = np.array(shader.GetInput("diffuseColor").Get())
+        base = np.array(material_of(material.GetPrim().GetName()).base)
+        linear = np.where(base <= 0.04045, base / 12.92, ((base + 0.055) / 1.055) ** 2.4)
+        np.testing.assert_allclose(colour, linear, atol=1e-6)
+        labels.update(UsdSemantics.LabelsAPI(prim, "class").GetLabelsAttr().Get() or [])
+    from song.datasets.scenes.dressing import PASSAGE_CATEGORIES
+
+    assert "wall" in labels and categories - set(PASSAGE_CATEGORIES) <= labels  # every furnished category
+    rooms = stage.GetPrimAtPath("/World/rooms").GetChildren()
+    assert len(rooms) == len(package.semantic_map.regions)
+    assert {UsdSemantics.LabelsAPI(r, "class").GetLabelsAttr().Get()[0] for r in rooms} == {
+        r.type for r in package.semantic_map.regions
+    }
+    assert all(UsdGeom.Imageable(r).GetPurposeAttr().Get() == "guide" for r in rooms)
