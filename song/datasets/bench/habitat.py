@@ -10,8 +10,18 @@ Layout of an export folder (``habitat.dataset.data_path`` = ``<out>/{split}/{spl
 
     <split>/<split>.json.gz           PointNav episodes (NavigationEpisode fields + info)
     scenes/<scene_id>.glb             the scene's collision proxy and floor, Y-up (trimesh; from the
-                                      occupancy map, 2.5 m walls, when the scene has no proxy)
+                                      occupancy map, 2.5 m walls, when the scene has no proxy), with
+                                      flat normals and a PBR material per mesh (the proxy's albedos)
+    scenes/<scene_id>.3dgs.ply        the scene's Gaussians as the release has them (for Habitat-GS
+                                      users; SONG's Z-up frame), when the scene has them
     scenes/<scene_id>.pedestrians.json.gz   the scene's pedestrian tracks, Habitat frame, 30 FPS
+    stages/<scene_id>.stage_config.json     habitat-sim's stage attributes (the GLB as render and
+                                      collision asset, Y up, -Z front, metres)
+    song.scene_dataset_config.json    the scene dataset config that lists the stages
+
+A ``.navmesh`` needs habitat-sim's Recast build, which is not a dependency here: load the dataset
+config in habitat-sim and call ``sim.recompute_navmesh(sim.pathfinder, NavMeshSettings())`` (agent
+radius and height as SONG's robot), then ``sim.pathfinder.save_nav_mesh(path)``.
 
 Each episode's ``scene_id`` is ``scenes/<scene_id>.glb`` (joined to ``scenes_dir`` by Habitat);
 ``info`` carries SONG's grading fields, the robot's start time ``song_t0`` in the scenario and the
@@ -35,6 +45,7 @@ from song.errors import BenchmarkError
 from song.util import check_id, write_bytes_atomic
 
 SCENES_DIR = "scenes"
+STAGES_DIR = "stages"
 WALL_HEIGHT_M = 2.5  # blocked cells become solids this tall for a scene without a USD proxy
 
 
@@ -70,9 +81,24 @@ def export_habitat(bench: Benchmark, out: str | Path) -> Path:
     out = Path(out)
     rows = bench.episodes_table.to_pylist()
     root = out.parent if out.name.endswith(".json.gz") else out
-    for scene_id in sorted({check_id(row["scene_id"], "scene id") for row in rows}):  # ids from the release name files
+    scene_ids = sorted({check_id(row["scene_id"], "scene id") for row in rows})  # ids from the release name files
+    for scene_id in scene_ids:
         write_scene_glb(bench, scene_id, root / SCENES_DIR / f"{scene_id}.glb")
         _write_gzip_json(root / SCENES_DIR / f"{scene_id}.pedestrians.json.gz", _pedestrians(bench, scene_id))
+        gaussians = bench.blob(bench._scenes[scene_id].get("gaussians"))
+        if gaussians is not None:
+            write_bytes_atomic(root / SCENES_DIR / f"{scene_id}.3dgs.ply", Path(gaussians).read_bytes())
+        stage = {
+            "render_asset": f"../{SCENES_DIR}/{scene_id}.glb",
+            "collision_asset": f"../{SCENES_DIR}/{scene_id}.glb",
+            "up": [0.0, 1.0, 0.0],
+            "front": [0.0, 0.0, -1.0],
+            "units_to_meters": 1.0,
+            "requires_lighting": True,
+        }
+        write_bytes_atomic(root / STAGES_DIR / f"{scene_id}.stage_config.json", json.dumps(stage, indent=1).encode())
+    dataset = {"stages": {"paths": {".json": [f"{STAGES_DIR}/"]}}}
+    write_bytes_atomic(root / "song.scene_dataset_config.json", json.dumps(dataset, indent=1).encode())
     if out.name.endswith(".json.gz"):
         return _write_habitat(bench, rows, out)
     for split in sorted(check_id(s, "split") for s in bench.splits()):
@@ -99,14 +125,32 @@ def write_scene_glb(bench: Benchmark, scene_id: str, path: Path) -> Path:
 
 
 def glb_bytes(meshes: list[ProxyMesh]) -> bytes:
-    """Z-up meshes as the bytes of one Y-up binary glTF, a node per mesh (its name kept)."""
+    """Z-up meshes as the bytes of one Y-up binary glTF, a node per mesh (its name kept).
+
+    Each mesh gets flat normals (its vertices unshared per face) and a PBR material: the base albedo of
+    its material (glTF's ``baseColorFactor`` is linear, so converted from sRGB), roughness 0.8, not
+    metallic; a mesh without one is light grey.
+    """
     import trimesh
 
+    from song.datasets.scenes.materials import material_of
+
     scene = trimesh.Scene()
+    looks: dict[str, object] = {}
     for mesh in meshes:
-        geometry = trimesh.Trimesh(to_habitat_point(mesh.vertices), mesh.faces, process=False)
+        name = mesh.material or "grey"
+        if name not in looks:
+            base = np.array(material_of(mesh.material).base) if mesh.material else np.full(3, 0.8)
+            linear = np.where(base <= 0.04045, base / 12.92, ((base + 0.055) / 1.055) ** 2.4)
+            looks[name] = trimesh.visual.material.PBRMaterial(
+                name=name, baseColorFactor=[*linear.tolist(), 1.0], metallicFactor=0.0, roughnessFactor=0.8
+            )
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        vertices = to_habitat_point(mesh.vertices)[faces.reshape(-1)]  # one vertex per corner: flat normals
+        geometry = trimesh.Trimesh(vertices, np.arange(len(vertices)).reshape(-1, 3), process=False)
+        geometry.visual = trimesh.visual.TextureVisuals(material=looks[name])
         scene.add_geometry(geometry, node_name=mesh.name, geom_name=mesh.name)
-    return scene.export(file_type="glb")
+    return scene.export(file_type="glb", include_normals=True)
 
 
 def occupancy_meshes(static_map: StaticMap, height: float = WALL_HEIGHT_M) -> list[ProxyMesh]:

@@ -70,7 +70,8 @@ class ProxyMesh:
     """A mesh: name, vertices (V, 3) float64, triangle faces (F, 3) int.
 
     ``material`` (a :data:`song.datasets.scenes.materials.MATERIALS` name or ``paint:#rrggbb``), ``label``
-    (a semantic class) and ``convex`` are written to the proxy when given; meshes read back carry none.
+    (a semantic class) and ``convex`` are written to the proxy when given; meshes read back carry their
+    material.
     """
 
     name: str
@@ -313,4 +314,19 @@ def _read_mesh(path: Path, prim, mesh) -> ProxyMesh:
         for s, c in zip(starts, counts, strict=True)
     ]
     tri = np.concatenate(faces) if faces else np.zeros((0, 3), dtype=np.int64)
-    return ProxyMesh(prim.GetName(), points, tri.astype(np.int64))
+    return ProxyMesh(prim.GetName(), points, tri.astype(np.int64), material=_bound_material(prim))
+
+
+def _bound_material(prim) -> str | None:
+    """The name of the material bound to a prim when it is one of ours (a known material name), else None."""
+    from pxr import UsdShade
+
+    from song.datasets.scenes.materials import MATERIALS
+
+    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+    name = material.GetPrim().GetName() if material else ""
+    if name in MATERIALS:
+        return name
+    if name.startswith("paint__") and len(name) == 13:  # "paint:#rrggbb" as a USD identifier
+        return "paint:#" + name[7:]
+    return None

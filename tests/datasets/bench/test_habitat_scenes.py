@@ -58,3 +58,53 @@ def test_glb_from_a_usd_proxy(tmp_path: Path) -> None:
     scene = _load(glb_bytes(read_usd_proxy(path)))
     np.testing.assert_allclose(scene.bounds, [[1.0, 0.0, -1.5], [2.0, 0.75, -1.0]], atol=1e-6)
     assert "desk" in scene.graph.nodes
+
+
+def _gltf_validator() -> Path:
+    """Khronos' glTF validator from npm, installed once into a cache folder (the test's own environment)."""
+    import shutil
+    import subprocess
+
+    npm = shutil.which("npm")
+    if npm is None or shutil.which("node") is None:
+        pytest.skip("node and npm are needed to install Khronos' gltf-validator")
+    cache = Path.home() / ".cache" / "song-tests" / "gltf-validator"
+    if not (cache / "node_modules" / "gltf-validator").is_dir():
+        cache.mkdir(parents=True, exist_ok=True)
+        done = subprocess.run([npm, "install", "--silent", "--prefix", str(cache), "gltf-validator@2.0.0-dev.3.10"],
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
+        if done.returncode:
+            pytest.skip(f"npm could not install gltf-validator: {done.stderr.strip()[-200:]}")
+    return cache
+
+
+def test_a_scene_glb_passes_the_khronos_validator_with_materials_and_normals(tmp_path: Path) -> None:
+    import json
+    import struct
+    import subprocess
+
+    pytest.importorskip("pxr")
+    from song.datasets.scenes.generate import generate_scene
+    from song.datasets.scenes.usd import read_usd_proxy, read_usd_surfaces
+
+    root = generate_scene("office_0000", "office", 3, tmp_path / "s", True, 0.08)
+    usd = root / "scene_flat.usda"
+    data = glb_bytes([*read_usd_proxy(usd), *read_usd_surfaces(usd)])
+    (tmp_path / "scene.glb").write_bytes(data)
+    cache = _gltf_validator()
+    script = (
+        "const v=require('gltf-validator');const fs=require('fs');"
+        "v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[1])))"
+        ".then(r=>console.log(JSON.stringify(r.issues))).catch(e=>{console.error(e);process.exit(2)});"
+    )
+    done = subprocess.run(["node", "-e", script, str(tmp_path / "scene.glb")], capture_output=True, text=True,
+                          cwd=cache, env={"NODE_PATH": str(cache / "node_modules"), "PATH": "/usr/bin:/bin"})  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    issues = json.loads(done.stdout)
+    assert issues["numErrors"] == 0, issues["messages"][:5]
+    length = struct.unpack_from("<I", data, 12)[0]
+    gltf = json.loads(data[20 : 20 + length])
+    primitives = [p for m in gltf["meshes"] for p in m["primitives"]]
+    assert all("NORMAL" in p["attributes"] and "material" in p for p in primitives)
+    colours = {tuple(m["pbrMetallicRoughness"]["baseColorFactor"]) for m in gltf["materials"]}
+    assert len(colours) >= 5  # walls, floors, wood, fabric, metal: the proxy's albedos, not one grey
