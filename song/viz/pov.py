@@ -129,7 +129,11 @@ def render_pov(
     size: tuple[int, int] = (320, 240),
     backend: str = "auto",
 ) -> list[Path]:
-    """Run ``policy`` on the episode and write ``<episode>_<policy>_pov.mp4`` and ``..._pov.png``."""
+    """Run ``policy`` on the episode; write its first-person video and pictures.
+
+    ``<episode>_<policy>_pov.mp4``, ``..._pov.png`` (a strip of five frames) and ``..._pov_first.png``
+    (the first frame's RGB | depth).
+    """
     release = open_benchmark(bench)
     width, height = size
     camera = {"width": width, "height": height, "backend": backend}
@@ -152,4 +156,6 @@ def render_pov(
     video = write_mp4(out_dir / f"{stem}.mp4", frames, fps=fps)
     picks = np.linspace(0, len(frames) - 1, min(STRIP_FRAMES, len(frames))).round().astype(int)
     strip = np.concatenate([frames[k][::2, ::2] for k in picks], axis=0)
-    return [video, write_png(out_dir / f"{stem}.png", strip)]
+    camera_panels = 2 * round(width * PANEL_HEIGHT / height)  # the first frame's RGB | depth, full size
+    first = write_png(out_dir / f"{stem}_first.png", frames[0][:, :camera_panels])
+    return [video, write_png(out_dir / f"{stem}.png", strip), first]
