@@ -113,7 +113,7 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         if self.render_mode is None or self.runner is None:
             return None
         if self._pictures is None:
-            from song.viz.pov import PovPictures
+            from song.runtime.pictures import PovPictures
 
             self._pictures = PovPictures(self.params, self.bench.max_pedestrians, self.camera)
         return self._pictures.frame(self.runner, self.runner.observation())

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from song.datasets.bench import open_benchmark
-from song.viz.draw import DIFFICULTY_COLOURS
+from song.render.draw import DIFFICULTY_COLOURS
 
 FACTORS = (
     ("path_length", "optimal path length L* (m)"),

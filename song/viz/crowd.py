@@ -8,9 +8,9 @@ import numpy as np
 
 from song.datasets.run import RunFolder, read_crowd, read_intents, read_run_info
 from song.datasets.scenes import load_scene_package
+from song.render.draw import colour, label, write_png
 from song.render.video import write_mp4
 from song.util import check_id
-from song.viz.draw import colour, label, write_png
 from song.viz.scene import draw_scene
 
 

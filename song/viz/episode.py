@@ -9,9 +9,9 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from song.datasets.bench import open_benchmark, pedestrian_states
+from song.render.draw import colour, label, map_canvas, write_png
 from song.render.video import write_mp4
 from song.util import check_id
-from song.viz.draw import colour, label, map_canvas, write_png
 
 ENCOUNTER_RADIUS_M = 3.0
 

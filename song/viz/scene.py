@@ -8,7 +8,7 @@ import numpy as np
 
 from song.datasets.scenes import ScenePackage, load_scene_package
 from song.geometry.freespace import erode
-from song.viz.draw import Canvas, colour, label, map_canvas, write_png
+from song.render.draw import Canvas, colour, label, map_canvas, write_png
 
 AGENT_RADIUS_M = 0.25
 

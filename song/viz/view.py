@@ -12,8 +12,8 @@ from song.datasets.scenes.package import GAUSSIANS
 from song.errors import SceneError
 from song.geometry.freespace import clearance_field
 from song.render import render, robot_camera
+from song.render.draw import write_png
 from song.runtime.vision import scene_gaussians
-from song.viz.draw import write_png
 
 BACKGROUND = (0.02, 0.02, 0.03)
 VIEW_RANGE_M = 9.0  # rays of the view search stop here
