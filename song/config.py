@@ -201,6 +201,7 @@ class CameraConfig(_Section):
     far_m: float = Field(100.0, gt=0.0, description="far plane, m")
     width_px: int = Field(960, ge=1, description="image width, px")
     height_px: int = Field(540, ge=1, description="image height, px")
+    model: str = Field("ideal", description="camera model: ideal (the paper) | d435i | a camera_model plugin")
 
 
 class SongConfig(_Section):

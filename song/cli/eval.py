@@ -43,8 +43,11 @@ def eval_command(
     render_backend: str = typer.Option(
         "auto", "--render-backend", help="auto | numba | gsplat | reference | a render_backend plugin"
     ),
-    camera_model: str = typer.Option(
-        "ideal", "--camera-model", help="what the camera does to the ideal image: ideal | a camera_model plugin"
+    camera_model: str | None = typer.Option(
+        None,
+        "--camera-model",
+        help="what the camera does to the ideal image: ideal | d435i | a camera_model plugin (default: the "
+        "release's; another one is recorded as an override)",
     ),
     out: Path = typer.Option(Path("runs/eval"), "--out", help="results folder"),
     workers: int = WorkersOption,
@@ -89,7 +92,7 @@ def eval_command(
     params, changed = apply_overrides(release.params, requested, override, str(config or "--set"))
     for key, (old, new) in changed.items():
         err_console.print(f"[yellow]override[/yellow] {key}: {old} → {new} (results marked unofficial)")
-    camera: dict = {"backend": render_backend, "model": camera_model}
+    camera: dict = {"backend": render_backend, "model": camera_model or params.camera.model}
     if resolution:
         width, height = parse_size(resolution, "--resolution")
         camera.update(width=width, height=height)

@@ -126,9 +126,13 @@ def make_setup(
     names = parse_sensor_names([*declared, *parse_sensor_names(sensors or [])])
     options = {"camera": dict(camera)} if camera else {}
     plugins.check_name("render_backend", options.get("camera", {}).get("backend", "auto"), extra=("auto",))
-    plugins.check_name("camera_model", options.get("camera", {}).get("model", "ideal"))
     params = params or bench.params
-    return EvalSetup(policy, names, params, dict(overrides or {}), options, step_timeout_s, isolate, no_avatars, info)
+    model = options.get("camera", {}).get("model") or params.camera.model
+    plugins.check_name("camera_model", model)
+    overrides = dict(overrides or {})
+    if model != bench.params.camera.model:  # another sensor than the release's: not the official protocol
+        overrides["camera.model"] = [bench.params.camera.model, model]
+    return EvalSetup(policy, names, params, overrides, options, step_timeout_s, isolate, no_avatars, info)
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ from song.datasets.bench.types import Episode, RuntimeParams, pedestrian_states
 from song.errors import SongError
 from song.geometry.rotations import wrap_angle
 from song.render import resolve_backend
+from song.runtime import camera_models  # noqa: F401 - registers the d435i camera model
 from song.runtime.robot import Pose
 from song.runtime.vision import SceneView
 from song.runtime.world import StaticWorld, cast_circles
@@ -301,7 +302,7 @@ class CameraSensor(Sensor):
 
         Its arrays are read-only: every sensor and the policy see the same pixels.
         """
-        out = self.scene_view.render(view.pose, view.t, self.width, self.height)
+        out = self.scene_view.render(view.pose, view.t, self.width, self.height, tuple(view.command))
         for array in (out.rgb, out.depth, out.alpha):
             array.setflags(write=False)
         return out
@@ -453,7 +454,7 @@ class SensorSuite:
         options = {name: dict(values) for name, values in (options or {}).items()}
         options.setdefault("pedestrians", {}).setdefault("capacity", max_pedestrians)
         camera = options.pop("camera", {})  # width, height, backend, model: shared by every camera sensor
-        shared = SceneView(camera.get("backend", "auto"), camera.get("model", "ideal"))
+        shared = SceneView(camera.get("backend", "auto"), camera.get("model") or params.camera.model)
         for name in CAMERA_SENSORS:
             options.setdefault(name, {}).update({**camera, "scene_view": shared})
             options[name].pop("backend", None)

@@ -76,11 +76,16 @@ def _prepare(asset_path: Path | None, cache_path: Path | None) -> _Avatar:
 
 @dataclass(frozen=True)
 class CameraContext:
-    """What a camera model may use besides the ideal image: the episode's seed, the step's time and pose."""
+    """What a camera model may use besides the ideal image.
+
+    The episode's seed, the step's time and pose, and the robot's last command (v m/s, ω rad/s): the
+    motion during the exposure.
+    """
 
     seed: int
     t: float
     pose: Pose
+    command: tuple[float, float] = (0.0, 0.0)
 
 
 class IdealCamera:
@@ -171,9 +176,15 @@ class SceneView:
             sets.append(GaussianSet(means, quats, avatar.scales, avatar.opacities, avatar.sh))
         return sets
 
-    def render(self, pose: Pose, t: float, width: int, height: int) -> RenderOutput:
-        """The robot camera's view at ``pose`` and scenario time ``t`` (cached for repeated calls)."""
-        key = (pose.x, pose.y, pose.yaw, t, width, height)
+    def render(
+        self, pose: Pose, t: float, width: int, height: int, command: tuple[float, float] = (0.0, 0.0)
+    ) -> RenderOutput:
+        """The robot camera's view at ``pose`` and scenario time ``t`` (cached for repeated calls).
+
+        ``command`` is the robot's last (v, ω): a camera model may blur by the motion it causes.
+        """
+        command = (float(command[0]), float(command[1]))
+        key = (pose.x, pose.y, pose.yaw, t, width, height, command)
         if self._last is not None and self._last[0] == key:
             return self._last[1]
         cam_cfg = self._episode.params.camera
@@ -184,6 +195,6 @@ class SceneView:
         out = render([self._scenes[self._episode.gaussians_path], *people], camera, self.backend)
         if self._model is None:
             self._model = plugins.lookup("camera_model", self.camera_model)(self._episode.params)
-        out = self._model.apply(out, CameraContext(int(self._episode.seed), float(t), pose))
+        out = self._model.apply(out, CameraContext(int(self._episode.seed), float(t), pose, command))
         self._last = (key, out)
         return out
