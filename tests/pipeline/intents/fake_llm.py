@@ -20,6 +20,7 @@ gzip-encoded 200 whose body decodes to ``delay_s`` MB).
 
 from __future__ import annotations
 
+import functools
 import json
 import threading
 import time
@@ -58,8 +59,13 @@ def _success(kind: str, text: str) -> dict:
     return {"choices": [{"index": 0, "message": {"role": "assistant", "content": text}}]}
 
 
+@functools.cache
 def _gzip_bomb(kind: str, megabytes: int) -> bytes:
-    """A gzip stream of a valid success reply whose text is ``megabytes`` MB of spaces (about 1000:1)."""
+    """A gzip stream of a valid success reply whose text is ``megabytes`` MB of spaces (about 1000:1).
+
+    Built once (compressing 256 MB takes seconds on a loaded machine) and before any request arrives,
+    so the client's deadline measures the transfer, not the fake's preparation.
+    """
     head, tail = json.dumps(_success(kind, "@")).encode().split(b"@")
     packer = zlib.compressobj(9, zlib.DEFLATED, 16 + zlib.MAX_WBITS)
     block = b" " * 2**20
@@ -76,6 +82,9 @@ class FakeServer:
 
     def __init__(self, kind: str, script: list[tuple[int | str, str, float]]) -> None:
         self.kind, self.script, self.requests = kind, list(script), []
+        for status, _, size in self.script:
+            if status == "gzip-bomb":
+                _gzip_bomb(kind, int(size))
         outer = self
 
         class Handler(BaseHTTPRequestHandler):
