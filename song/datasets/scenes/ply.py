@@ -14,6 +14,15 @@ Quantisation follows SuperSplat/splat-transform: a fraction t of a chunk range b
 floor(t·(2^bits − 1) + 0.5); a range narrower than 1e-5 stores 0; log-scale ranges are clamped to
 [−20, 20]; the last chunk's ranges include copies of its last splat (padding to 256).
 
+Orientation: SONG's frame is Z up. 3DGS viewers (SuperSplat, PlayCanvas, the web viewers) show a
+capture upright when its up is −Y, the frame COLMAP-trained captures come in (the PlayCanvas ``biker``
+sample, which SuperSplat shows standing, has its up along −Y). ``write_compressed_ply(...,
+viewer_frame=True)`` stores positions and rotations turned +90° about X (file = (x, −z, y)) and says
+so in the header comment :data:`VIEWER_FRAME_COMMENT`; :func:`read_gaussian_ply` undoes the turn when
+it finds that comment, so SONG reads its own frame back and files without it are read as they are.
+The scenes SONG synthesises are written this way (their colours are SH degree 0, which a rotation
+leaves unchanged).
+
 Order: :func:`write_compressed_ply` keeps the cloud's order by default, so splat ``i`` read back is
 splat ``i`` written (callers sort spatially for tight chunks); ``morton=True`` sorts as SuperSplat
 does (10-bit Morton code over the bounding box, buckets of more than 256 equal codes re-sorted within
@@ -43,6 +52,8 @@ SCALE_LIMIT = 20.0  # SuperSplat clamps log-scale chunk ranges (some files hold 
 MIN_SPAN = 1e-5  # a chunk range narrower than this stores fraction 0
 SH_COUNTS = (9, 24, 45)  # f_rest values per splat for SH degree 1, 2, 3
 OPACITY_EPS = 1e-6  # opacity byte 0/255 decodes to [eps, 1 − eps] so the logit stays finite
+VIEWER_FRAME_COMMENT = "song-frame: y-down for 3DGS viewers; SONG's z-up frame is this turned -90 deg about x"
+TURN_TO_VIEWER = np.array([np.sqrt(0.5), np.sqrt(0.5), 0.0, 0.0])  # +90° about x (w, x, y, z)
 
 
 @dataclass
@@ -205,7 +216,23 @@ def read_gaussian_ply(path: str | Path) -> GaussianCloud:
     except (ValueError, IndexError) as exc:  # truncated bodies surface here in plyfile's lazy reads
         raise FormatError(path, "vertex", f"truncated or malformed data ({exc})") from exc
     _check_finite(cloud, path)
+    if VIEWER_FRAME_COMMENT in ply.comments:
+        cloud = _turned(cloud, inverse=True)
     return cloud
+
+
+def _turned(cloud: GaussianCloud, inverse: bool = False) -> GaussianCloud:
+    """The cloud turned +90° about x (SONG → viewer frame), or back with ``inverse``."""
+    from song.geometry.rotations import quat_conj, quat_mul
+
+    x, y, z = cloud.means.astype(np.float64).T
+    means = np.column_stack([x, z, -y] if inverse else [x, -z, y])
+    turn = quat_conj(TURN_TO_VIEWER) if inverse else TURN_TO_VIEWER
+    quats = quat_mul(np.broadcast_to(turn, cloud.quats.shape), cloud.quats.astype(np.float64))
+    return GaussianCloud(
+        means.astype(np.float32), quats.astype(np.float32), cloud.log_scales, cloud.opacity_logits, cloud.sh_dc,
+        cloud.sh_rest,
+    )  # fmt: skip
 
 
 def _check_finite(cloud: GaussianCloud, path: Path) -> None:
@@ -387,11 +414,11 @@ def _part1by2(x: np.ndarray) -> np.ndarray:
     return (x ^ (x << np.uint32(2))) & np.uint32(0x09249249)
 
 
-def _ply_bytes(elements: list) -> bytes:
+def _ply_bytes(elements: list, comments: list[str] = ()) -> bytes:
     from plyfile import PlyData
 
     buffer = io.BytesIO()
-    PlyData(elements, text=False, byte_order="<").write(buffer)
+    PlyData(elements, text=False, byte_order="<", comments=list(comments)).write(buffer)
     return buffer.getvalue()
 
 
@@ -414,7 +441,9 @@ def write_standard_ply(path: str | Path, cloud: GaussianCloud) -> None:
     write_bytes_atomic(path, _ply_bytes([PlyElement.describe(data, "vertex")]))
 
 
-def write_compressed_ply(path: str | Path, cloud: GaussianCloud, *, morton: bool = False) -> None:
+def write_compressed_ply(
+    path: str | Path, cloud: GaussianCloud, *, morton: bool = False, viewer_frame: bool = False
+) -> None:
     """Write the SuperSplat compressed PLY (18-property chunks, plus ``sh`` when present), atomically.
 
     Args:
@@ -422,6 +451,8 @@ def write_compressed_ply(path: str | Path, cloud: GaussianCloud, *, morton: bool
         cloud: N ≥ 1 Gaussians; ``sh_rest`` with 3, 8 or 15 coefficients if present.
         morton: sort splats in SuperSplat's Morton order first; by default the cloud's own order is
             kept (callers sort spatially for tight chunks) so splat i read back is splat i written.
+        viewer_frame: store the cloud turned into the frame 3DGS viewers show upright (see the module
+            docstring); only for SH degree 0, which a rotation leaves as it is.
 
     The bytes depend only on the cloud (and ``morton``).
     """
@@ -432,6 +463,11 @@ def write_compressed_ply(path: str | Path, cloud: GaussianCloud, *, morton: bool
         raise ValueError("cannot write an empty Gaussian cloud")
     if cloud.sh_rest is not None and cloud.sh_rest.shape[1] * 3 not in SH_COUNTS:
         raise ValueError(f"sh_rest has {cloud.sh_rest.shape[1]} coefficients; compressed PLY holds 3, 8 or 15")
+    comments = []
+    if viewer_frame:
+        if cloud.sh_rest is not None:
+            raise ValueError("viewer_frame needs SH degree 0: higher SH bands would have to be rotated too")
+        cloud, comments = _turned(cloud), [VIEWER_FRAME_COMMENT]
     if morton:
         order = morton_order(cloud.means)
         cloud = GaussianCloud(*(None if a is None else a[order] for a in vars(cloud).values()))
@@ -469,4 +505,4 @@ def write_compressed_ply(path: str | Path, cloud: GaussianCloud, *, morton: bool
         for i in range(flat.shape[1]):
             sh[f"f_rest_{i}"] = q[:, i]
         elements.append(PlyElement.describe(sh, "sh"))
-    write_bytes_atomic(path, _ply_bytes(elements))
+    write_bytes_atomic(path, _ply_bytes(elements, comments))

@@ -418,7 +418,7 @@ def dress_package(
     _check_splat_count(root, package, spacing)
     dressing = build_dressing(package.semantic_map, package.occupancy, hints)
     cloud = synthesize_gaussians(dressing, spacing)
-    write_compressed_ply(root / GAUSSIANS, cloud)
+    write_compressed_ply(root / GAUSSIANS, cloud, viewer_frame=True)  # upright in SuperSplat and co.
     solids, surfaces = dressing_meshes(dressing, {o.id: o.category for o in package.semantic_map.objects})
     write_usd_proxy(root / USD_PROXY, solids, surfaces, hints.to_json(), room_meshes(package.semantic_map))
     return DressResult(

@@ -227,3 +227,25 @@ def test_bad_ply_names_file_and_element(tmp_path: Path, damage: str) -> None:
             reader(path)
         message = str(info.value)
         assert str(path) in message and where in message and "\n" not in message, message
+
+
+def test_scenes_are_stored_upright_for_3dgs_viewers_and_read_back_in_our_frame(tmp_path: Path) -> None:
+    from song.datasets.scenes.ply import VIEWER_FRAME_COMMENT
+
+    cloud = _random_cloud(512, 3)
+    cloud.means[:, 2] = np.abs(cloud.means[:, 2]) / 2  # a room: z from the floor (0) to 2.5 m
+    write_compressed_ply(tmp_path / "s.ply", cloud, viewer_frame=True)
+    ply = PlyData.read(str(tmp_path / "s.ply"))
+    assert VIEWER_FRAME_COMMENT in ply.comments
+    chunk = ply["chunk"]
+    # in the file the height runs along -y, as in a COLMAP capture that SuperSplat shows upright
+    assert chunk["max_y"].max() <= 1e-6 and chunk["min_y"].min() == pytest.approx(-cloud.means[:, 2].max(), abs=1e-3)
+    assert chunk["max_z"].max() == pytest.approx(cloud.means[:, 1].max(), abs=1e-3)  # our +y is the file's +z
+    back = read_gaussian_ply(tmp_path / "s.ply")
+    plain = tmp_path / "p.ply"
+    write_compressed_ply(plain, cloud)
+    reference = read_gaussian_ply(plain)  # the same quantisation in our own frame
+    assert np.abs(back.means - cloud.means).max() <= np.abs(reference.means - cloud.means).max() * 1.5 + 1e-4
+    assert _angle_deg(back.quats, cloud.quats).max() < 0.25  # the turn was undone on the rotations too
+    with pytest.raises(ValueError, match="SH degree 0"):
+        write_compressed_ply(tmp_path / "sh.ply", _random_cloud(10, 1, sh=3), viewer_frame=True)
