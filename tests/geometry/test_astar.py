@@ -81,3 +81,33 @@ def test_lengths_equal_scipy_dijkstra_over_the_same_graph() -> None:
     graph = grid_graph(free)
     dijkstra = [distances_from(graph, a)[graph.index[b]] for a, b in pairs]
     np.testing.assert_allclose(dijkstra, compiled)
+
+
+def test_four_connected_search_on_mazes_equals_breadth_first_search() -> None:
+    from collections import deque
+
+    rng = np.random.default_rng(4)
+    for n in (9, 40, 81):
+        free = np.ones((n, n), dtype=bool)  # a serpentine: walls every 4th row, gaps at alternate ends
+        for k, r in enumerate(range(3, n - 1, 4)):
+            free[r, :] = False
+            free[r, (n - 2 if k % 2 == 0 else 0) : (n if k % 2 == 0 else 2)] = True
+        free &= rng.random((n, n)) > 0.05  # and some debris
+        free[0, 0] = free[n - 1, 0] = True
+        dist = np.full((n, n), -1)
+        dist[0, 0] = 0
+        queue = deque([(0, 0)])
+        while queue:
+            r, c = queue.popleft()
+            for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                if 0 <= r + dr < n and 0 <= c + dc < n and free[r + dr, c + dc] and dist[r + dr, c + dc] < 0:
+                    dist[r + dr, c + dc] = dist[r, c] + 1
+                    queue.append((r + dr, c + dc))
+        length, path = astar(free, (0, 0), (n - 1, 0), diagonal=False)
+        if dist[n - 1, 0] < 0:
+            assert path is None
+            continue
+        assert length == dist[n - 1, 0] and len(path) == length + 1
+        assert _check_path(free, path, diagonal=False) == length
+        assert astar(free, (0, 0), (n - 1, 0), limit=length / 2, diagonal=False)[1] is None
+    assert astar(np.ones((3, 3), bool), (1, 1), (1, 1), diagonal=False)[0] == 0.0
