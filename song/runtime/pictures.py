@@ -30,6 +30,21 @@ def depth_image(depth: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarra
     return rgb
 
 
+def depth_legend(panel: np.ndarray) -> np.ndarray:
+    """The depth panel with a colour bar at its right edge: 0 m at the bottom, DEPTH_RANGE_M at the top."""
+    from song.render.draw import label
+
+    height, width = panel.shape[:2]
+    top, bottom, x0 = height // 6, height - height // 6, width - 22
+    ramp = np.linspace(DEPTH_RANGE_M, 0.0, bottom - top)[:, None].repeat(10, axis=1)
+    out = panel.copy()
+    out[top - 1 : bottom + 1, x0 - 1 : x0 + 11] = 255
+    out[top:bottom, x0 : x0 + 10] = depth_image(ramp)
+    label(out, f"{DEPTH_RANGE_M:g} m", (x0 - 34, top + 8), (0, 0, 0), 0.4)
+    label(out, "0 m", (x0 - 26, bottom), (0, 0, 0), 0.4)
+    return out
+
+
 def _fit(image: np.ndarray, height: int) -> np.ndarray:
     import cv2
 
@@ -103,7 +118,7 @@ class PovPictures:
             obs = observation
         else:
             obs = self.sensors.observe(runner.view())
-        panels = [_fit(obs["rgb"], PANEL_HEIGHT), _fit(depth_image(obs["depth"]), PANEL_HEIGHT)]
+        panels = [_fit(obs["rgb"], PANEL_HEIGHT), depth_legend(_fit(depth_image(obs["depth"]), PANEL_HEIGHT))]
         map_panel = _fit(_map_panel(self.canvas, runner, self.fov), PANEL_HEIGHT)
         panels.append(_pad_to(map_panel, min(self.map_width, 2 * PANEL_HEIGHT)))
         return np.concatenate(panels, axis=1)
