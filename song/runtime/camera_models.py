@@ -40,6 +40,7 @@ import math
 import numpy as np
 
 from song import plugins
+from song.datasets.scenes.materials import linear_to_srgb, srgb_to_linear
 from song.render import RenderOutput
 from song.render.camera import focal_from_hfov
 from song.runtime.vision import CameraContext
@@ -71,17 +72,9 @@ def occluded(depth: np.ndarray, focal_px: float, baseline_m: float = BASELINE_M)
     return out & (depth > 0)
 
 
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def _linear_to_srgb(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(np.maximum(c, 0.0), 1 / 2.4) - 0.055)
-
-
-LINEAR_OF_U8 = _srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)  # 8-bit sRGB → linear light
+LINEAR_OF_U8 = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)  # 8-bit sRGB → linear light
 LUT_STEPS = 4096
-U8_OF_LINEAR = np.rint(_linear_to_srgb(np.arange(LUT_STEPS) / (LUT_STEPS - 1)) * 255.0).astype(np.uint8)
+U8_OF_LINEAR = np.rint(linear_to_srgb(np.arange(LUT_STEPS) / (LUT_STEPS - 1)) * 255.0).astype(np.uint8)
 
 
 def _blur_rows(image: np.ndarray, length_px: float) -> np.ndarray:

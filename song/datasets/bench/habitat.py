@@ -133,7 +133,7 @@ def glb_bytes(meshes: list[ProxyMesh]) -> bytes:
     """
     import trimesh
 
-    from song.datasets.scenes.materials import material_of
+    from song.datasets.scenes.materials import material_of, srgb_to_linear
 
     scene = trimesh.Scene()
     looks: dict[str, object] = {}
@@ -141,7 +141,7 @@ def glb_bytes(meshes: list[ProxyMesh]) -> bytes:
         name = mesh.material or "grey"
         if name not in looks:
             base = np.array(material_of(mesh.material).base) if mesh.material else np.full(3, 0.8)
-            linear = np.where(base <= 0.04045, base / 12.92, ((base + 0.055) / 1.055) ** 2.4)
+            linear = srgb_to_linear(base)
             looks[name] = trimesh.visual.material.PBRMaterial(
                 name=name, baseColorFactor=[*linear.tolist(), 1.0], metallicFactor=0.0, roughnessFactor=0.8
             )

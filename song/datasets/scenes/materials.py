@@ -150,6 +150,18 @@ def value_noise(u: np.ndarray, v: np.ndarray, scale: float, seed: int) -> np.nda
     return (a * (1 - sx) + b * sx) * (1 - sy) + (c * (1 - sx) + d * sx) * sy
 
 
+def srgb_to_linear(c: np.ndarray | float) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] → linear light (IEC 61966-2-1)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c: np.ndarray | float) -> np.ndarray:
+    """Linear light in [0, 1] → sRGB-encoded values (IEC 61966-2-1)."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(np.maximum(c, 0.0), 1 / 2.4) - 0.055)
+
+
 def material_of(name: str) -> Material:
     """A material by name; ``"paint:#rrggbb"`` is a plaster wall of that colour."""
     if name.startswith("paint:#") and len(name) == 13:

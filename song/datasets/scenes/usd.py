@@ -132,10 +132,6 @@ def _define_mesh(stage, UsdGeom, Vt, prim_path: str, mesh: ProxyMesh):
     return prim
 
 
-def _srgb_to_linear(c: float) -> float:
-    return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
-
-
 class _Decorator:
     """Binds materials (one ``UsdPreviewSurface`` per name, made on first use) and semantic labels."""
 
@@ -146,7 +142,7 @@ class _Decorator:
     def material(self, name: str):
         from pxr import Gf, Sdf, UsdShade
 
-        from song.datasets.scenes.materials import material_of
+        from song.datasets.scenes.materials import material_of, srgb_to_linear
 
         if name not in self.looks:
             if not self.looks:
@@ -157,7 +153,7 @@ class _Decorator:
             shader.CreateIdAttr("UsdPreviewSurface")
             albedo = material_of(name)
             shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(
-                Gf.Vec3f(*(_srgb_to_linear(c) for c in albedo.base))
+                Gf.Vec3f(*srgb_to_linear(albedo.base).tolist())
             )
             metal = albedo.texture == "metal"
             shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.4 if metal else 0.8)
