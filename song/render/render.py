@@ -142,6 +142,12 @@ def gsplat_available() -> str:
     return ""
 
 
+def _gsplat_failed(exc: Exception) -> None:
+    """Remember (and say once) that gsplat failed here: ``auto`` renders with numba from now on."""
+    _GSPLAT_STATE["error"] = f"gsplat failed ({type(exc).__name__}: {exc}); rendering with numba on the CPU"
+    log.warning(_GSPLAT_STATE["error"])
+
+
 def _render_gsplat(sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray, profile=None) -> RenderOutput:
     from song.render.gsplat_backend import render_gsplat
 
@@ -194,8 +200,7 @@ def render(
         try:
             return _render_gsplat(sets, camera, bg)
         except Exception as exc:  # CUDA compile or runtime failure: fall back once, say so
-            _GSPLAT_STATE["error"] = f"gsplat failed ({type(exc).__name__}: {exc}); rendering with numba on the CPU"
-            log.warning(_GSPLAT_STATE["error"])
+            _gsplat_failed(exc)
             name = "numba"
     return plugins.lookup("render_backend", name)(sets, camera, bg, profile)
 
@@ -228,7 +233,6 @@ def render_batch(
         except Exception as exc:
             if backend != "auto":
                 raise
-            _GSPLAT_STATE["error"] = f"gsplat failed ({type(exc).__name__}: {exc}); rendering with numba on the CPU"
-            log.warning(_GSPLAT_STATE["error"])
+            _gsplat_failed(exc)
             backend = "numba"
     return [render(sets, camera, backend, background) for camera in cameras]

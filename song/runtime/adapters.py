@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import tomllib
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -66,7 +66,6 @@ class AdapterProfile:
     depth_invalid: float = 0.0
     goal_clip_m: float | None = None
     waypoint_unit_m: float = 1.0
-    extra: dict[str, Any] = field(default_factory=dict)
 
 
 @cache

@@ -33,6 +33,7 @@ from song.runtime.policies import load_policy, policy_info, policy_sensors
 from song.runtime.sensors import SensorSuite, parse_sensor_names
 from song.util import write_bytes_atomic, write_json_atomic, write_text_atomic
 
+ABLATION_SUFFIX = " (no avatars)"  # how an avatar-free ablation's rows are labelled beside their policy's
 RESULTS_SCHEMA = pa.schema(
     [
         ("episode_id", pa.string()),
@@ -87,7 +88,7 @@ class EvalSetup:
     @property
     def label(self) -> str:
         """The name results are filed under: the policy, with `` (no avatars)`` for the ablation."""
-        return f"{self.policy} (no avatars)" if self.no_avatars else self.policy
+        return self.policy + (ABLATION_SUFFIX if self.no_avatars else "")
 
 
 def make_setup(
@@ -271,7 +272,7 @@ def results_in(out_dir: Path, latest: dict[str, dict] | None = None) -> dict[str
     for path in sorted(out_dir.glob("*.json")):
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
-            label = data["policy"] + (" (no avatars)" if data.get("ablation") == "no_avatars" else "")
+            label = data["policy"] + (ABLATION_SUFFIX if data.get("ablation") == "no_avatars" else "")
             rows[label] = {  # strict JSON stores a non-finite metric as null
                 d: {k: float("nan") if v is None else v for k, v in row.items()} for d, row in data["metrics"].items()
             }
@@ -282,4 +283,6 @@ def results_in(out_dir: Path, latest: dict[str, dict] | None = None) -> dict[str
     ordered = {
         label: dict(sorted(by.items(), key=lambda kv: order.get(kv[0], len(order)))) for label, by in rows.items()
     }
-    return dict(sorted(ordered.items(), key=lambda kv: (kv[0].removesuffix(" (no avatars)"), kv[0].endswith(")"))))
+    return dict(
+        sorted(ordered.items(), key=lambda kv: (kv[0].removesuffix(ABLATION_SUFFIX), kv[0].endswith(ABLATION_SUFFIX)))
+    )

@@ -73,12 +73,9 @@ def policy_sensors(policy: object) -> tuple[str, ...]:
 
 def policy_info(policy: object) -> dict[str, Any]:
     """What results record about how a policy is driven: ``{"policy_kind": "commands"}``, or a tracker's description."""
-    describe = getattr(policy, "describe", None)
     from song.runtime.waypoints import PurePursuitTracker
 
-    if isinstance(policy, PurePursuitTracker) and callable(describe):
-        return describe()
-    return {"policy_kind": "commands"}
+    return policy.describe() if isinstance(policy, PurePursuitTracker) else {"policy_kind": "commands"}
 
 
 def steer_to(bearing: float, robot: RobotConfig, gain: float = 2.0, turn_in_place: float = 0.6) -> tuple[float, float]:

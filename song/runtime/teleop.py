@@ -209,17 +209,13 @@ class TeleopServer:
 
 def choose_resolution(bench: Any, episode: Any) -> tuple[int, int]:
     """The largest candidate size whose render (median of 3 after one warm-up) fits the render budget here."""
-    from song.runtime.sensors import SensorSuite
+    from song.runtime.robot import Pose
+    from song.runtime.vision import SceneView
 
+    pose = Pose(float(episode.start_xy[0]), float(episode.start_xy[1]), float(episode.start_yaw))
+    view = SceneView("auto", bench.params.camera.model)  # the renderer the camera sensors will use
+    view.reset(episode)  # the scene is loaded once for every candidate
     for width, height in CANDIDATE_SIZES:
-        suite = SensorSuite.build(
-            ("rgb",), bench.params, bench.max_pedestrians, {"camera": {"width": width, "height": height}}
-        )
-        view = suite.sensors["rgb"].scene_view
-        view.reset(episode)
-        from song.runtime.robot import Pose
-
-        pose = Pose(float(episode.start_xy[0]), float(episode.start_xy[1]), float(episode.start_yaw))
         times = []
         for k in range(4):
             start = time.perf_counter()
