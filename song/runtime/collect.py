@@ -330,7 +330,7 @@ def collect(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SongError(f"{out}: a file; collect writes a dataset folder (choose another --out)")
-    _refuse_non_empty(out)
+    refuse_non_empty(out)
     bench = open_benchmark(bench_path)
     bench.require_intact(allow_modified)
     episodes = list(bench.episodes(split=split))[: limit if limit is not None else None]
@@ -339,7 +339,7 @@ def collect(
     load_policy(policy_name)  # an unknown policy fails here, before anything is written
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out / LOCK_FILE, "dataset folder"):  # a second collect into --out stops at once
-        _refuse_non_empty(out)  # checked again under the lock
+        refuse_non_empty(out)  # checked again under the lock
         partial = out / PARTIAL_DIR  # what a killed collect left (we hold the lock: nobody is writing it)
         shutil.rmtree(partial, ignore_errors=True)
         fps = float(bench.params.robot.control_hz)
@@ -375,10 +375,10 @@ def write_dataset(out: Path, kept: list[dict[str, Any]], fps: float, split: str,
     return written["frames"]
 
 
-def _refuse_non_empty(out: Path) -> None:
-    """Refuse an ``out`` holding anything but the lock and what a killed collect left."""
+def refuse_non_empty(out: Path, writer: str = "collect") -> None:
+    """Refuse an ``out`` holding anything but the lock and what a killed writer left."""
     if out.is_dir() and any(p.name not in (LOCK_FILE, PARTIAL_DIR) for p in out.iterdir()):
-        raise SongError(f"{out}: not empty; collect writes a new dataset (choose another --out)")
+        raise SongError(f"{out}: not empty; {writer} writes a new dataset (choose another --out)")
 
 
 def _write_episodes(out: Path, kept: list[dict[str, Any]], fps: float) -> dict[str, Any]:

@@ -254,7 +254,7 @@ def run_teleop(
         The results summary (as ``song eval`` writes it).
     """
     from song.datasets.bench import open_benchmark
-    from song.runtime.collect import LOCK_FILE, record_rollout, write_dataset
+    from song.runtime.collect import LOCK_FILE, record_rollout, refuse_non_empty, write_dataset
     from song.runtime.evaluate import EvalSetup, write_results
     from song.util import folder_lock
 
@@ -265,8 +265,7 @@ def run_teleop(
         raise SongError(f"{bench_path}: no '{split}' episodes to drive")
     out = Path(out)
     dataset = out / "dataset"
-    if dataset.exists() and any(p.name != LOCK_FILE for p in dataset.iterdir()):
-        raise SongError(f"{dataset}: not empty; teleop writes a new dataset (choose another --out)")
+    refuse_non_empty(dataset, "teleop")  # before anyone drives: the runs would have nowhere to go
     params = params or bench.params
     released, used = bench.params.to_json(), params.to_json()
     overrides = {
@@ -306,6 +305,7 @@ def run_teleop(
     summary = write_results(out, setup, results, bench)
     dataset.mkdir(parents=True, exist_ok=True)
     with folder_lock(dataset / LOCK_FILE, "dataset folder"):
+        refuse_non_empty(dataset, "teleop")  # again under the lock
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": "human",
                  "split": split, "keep": "all", "rollouts": len(records),
                  "successes": sum(r["outcome"] == "success" for r in records), "release_check": "ok", "ablation": None}  # fmt: skip
