@@ -59,20 +59,14 @@ def _gather(sets: Sequence[GaussianSet]) -> tuple[tuple[Any, ...], int]:
 def render_gsplat_batch(
     sets: Sequence[GaussianSet], cameras: Sequence[Camera], background: np.ndarray, eps2d: float
 ) -> list[RenderOutput]:
-    """The same Gaussians seen by several cameras of one size, in one gsplat call.
+    """The same Gaussians seen by several cameras, in one gsplat call.
 
-    Raises:
-        ValueError: no camera, or cameras of different sizes or clip planes.
+    The cameras must share their size and clip planes (:func:`song.render.render.render_batch` checks).
     """
     import torch
     from gsplat import rasterization
 
-    if not cameras:
-        raise ValueError("render_gsplat_batch needs at least one camera")
     first = cameras[0]
-    shape = (first.width, first.height, first.near, first.far)
-    if any((c.width, c.height, c.near, c.far) != shape for c in cameras):
-        raise ValueError("render_gsplat_batch: every camera must have the same size and clip planes")
     (means, quats, scales, opacities, sh), degree = _gather(sets)
 
     def t(a: np.ndarray) -> Any:

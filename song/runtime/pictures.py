@@ -20,7 +20,7 @@ PANEL_HEIGHT = 360  # px of every panel
 DEPTH_RANGE_M = 8.0
 
 
-def depth_image(depth: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray:
+def depth_image(depth: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint8 turbo colours of a depth image (near red → far blue), black where depth is 0."""
     import cv2
 
