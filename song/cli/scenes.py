@@ -138,8 +138,28 @@ def splat_command(
     out: Path | None = typer.Option(None, "--out", help="write complete copies here (default: in place)"),
     spacing: float | None = SpacingOption,
     force: bool = typer.Option(False, "--force", help="also replace Gaussian scenes that exist"),
+    light: bool = typer.Option(True, "--light/--no-light", help="bake the scene's lights (lights.json) in"),
 ) -> None:
-    """Synthesise the Gaussian scene (and USD proxy) of packages that lack one, from their geometry."""
+    """Synthesise the Gaussian scene (and USD proxy) of packages that lack one, from their geometry.
+
+    The scene's lights (``lights.json``, placed by rule when the package has none) are baked into the
+    Gaussians with shadows and bounced light; ``--no-light`` gives the flat look of earlier releases.
+    """
+    _dress_all(folder, out, spacing, force, light, "scene Gaussians")
+
+
+@scenes_app.command("light")
+@handle_errors
+def light_command(
+    folder: Path = typer.Argument(..., help="a scene package, or a folder of them"),
+    out: Path | None = typer.Option(None, "--out", help="write complete copies here (default: in place)"),
+    spacing: float | None = SpacingOption,
+) -> None:
+    """Re-bake the Gaussian scene of packages from their ``lights.json`` (edit it, then run this)."""
+    _dress_all(folder, out, spacing, True, True, "lit scene Gaussians")
+
+
+def _dress_all(folder: Path, out: Path | None, spacing, force: bool, light: bool, title: str) -> None:
     import shutil
 
     from song.datasets.scenes import find_scene_packages
@@ -162,11 +182,11 @@ def splat_command(
             rows.append({"scene": root.name, "status": "skipped", "gaussians": "exists"})
             continue
         try:
-            result = dress_package(target, spacing=_spacing(spacing))
+            result = dress_package(target, spacing=_spacing(spacing), light=light)
         except SongError as exc:
             rows.append({"scene": root.name, "status": "failed", "gaussians": str(exc)})
             continue
         rows.append({"scene": root.name, "status": "ok", "gaussians": f"{result.gaussians:,} ({result.ply_mb:.1f} MB)"})
-    console.print(status_table(f"scene Gaussians in {out or folder}", rows, ["scene", "status", "gaussians"]))
+    console.print(status_table(f"{title} in {out or folder}", rows, ["scene", "status", "gaussians"]))
     if any(r["status"] == "failed" for r in rows):
         raise typer.Exit(1)

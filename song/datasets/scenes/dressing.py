@@ -49,6 +49,16 @@ class Opening:
 
 
 @dataclass(frozen=True)
+class Window:
+    """A window: the segment ``a``–``b`` (m) along a wall's centre line, glazed from ``z0`` to ``z1``."""
+
+    a: tuple[float, float]
+    b: tuple[float, float]
+    z0: float
+    z1: float
+
+
+@dataclass(frozen=True)
 class DressingHints:
     """What a scene's source knows beyond its package files (stored in the USD proxy's layer metadata).
 
@@ -58,6 +68,8 @@ class DressingHints:
         wall_material: a material name or ``"paint:#rrggbb"`` for every wall.
         ceiling_height_m: wall height, m.
         seed: the dressing seed (furniture variants, textures, sample jitter).
+        windows: the source's windows (ProcTHOR's); None: windows by rule on exterior walls
+            (:func:`song.datasets.scenes.lights.rule_windows`).
     """
 
     openings: tuple[Opening, ...] = ()
@@ -65,6 +77,7 @@ class DressingHints:
     wall_material: str | None = None
     ceiling_height_m: float | None = None
     seed: int = 0
+    windows: tuple[Window, ...] | None = None
 
     def to_json(self) -> str:
         """Canonical JSON text."""
@@ -84,6 +97,9 @@ class DressingHints:
             wall_material=data.get("wall_material"),
             ceiling_height_m=data.get("ceiling_height_m"),
             seed=int(data.get("seed", 0)),
+            windows=None
+            if data.get("windows") is None
+            else tuple(Window(tuple(w["a"]), tuple(w["b"]), float(w["z0"]), float(w["z1"])) for w in data["windows"]),
         )
 
 

@@ -1,7 +1,7 @@
 """Scene packages: load, validate and write.
 
 A package is a folder ``<scene_id>/`` with ``semantic_map.json`` and ``occupancy.png`` (required),
-``3dgs_compressed.ply`` and ``scene_flat.usda`` (optional). :func:`load_scene_package` runs every
+``3dgs_compressed.ply``, ``scene_flat.usda`` and ``lights.json`` (optional). :func:`load_scene_package` runs every
 check and raises :class:`SceneError` with one line naming the file and the field.
 """
 
@@ -24,7 +24,8 @@ SEMANTIC_MAP = "semantic_map.json"
 OCCUPANCY = "occupancy.png"
 GAUSSIANS = "3dgs_compressed.ply"
 USD_PROXY = "scene_flat.usda"
-PACKAGE_FILES = (SEMANTIC_MAP, OCCUPANCY, GAUSSIANS, USD_PROXY)
+LIGHTS = "lights.json"
+PACKAGE_FILES = (SEMANTIC_MAP, OCCUPANCY, GAUSSIANS, USD_PROXY, LIGHTS)
 BOUNDS_TOLERANCE_CELLS = 0.5  # image extent may differ from bounds by rounding to whole cells
 
 
@@ -164,11 +165,23 @@ def check_optional_files(root: Path) -> None:
             raise SceneError(gaussians, "vertex", "holds no splats")
     usd = root / USD_PROXY
     if usd.exists():
-        head = usd.read_bytes()[:4096] if usd.is_file() else b""
+        head = _usd_header(usd) if usd.is_file() else b""
         if not head.startswith(b"#usda "):
             raise SceneError(usd, "header", "not a USD text layer (expected '#usda 1.0' on the first line)")
-        if b'upAxis = "Z"' not in head.split(b"\n)", 1)[0]:
+        if b'upAxis = "Z"' not in head:
             raise SceneError(usd, "upAxis", 'layer metadata must say upAxis = "Z"')
+    if (root / LIGHTS).exists():
+        from song.datasets.scenes.lights import read_lights
+
+        read_lights(root / LIGHTS)
+
+
+def _usd_header(path: Path, limit: int = 8 << 20) -> bytes:
+    """A text layer's first line and metadata block (up to the first line that is only ``)``)."""
+    with path.open("rb") as f:
+        head = f.read(limit)
+    end = head.find(b"\n)")
+    return head if end < 0 else head[:end]
 
 
 def load_scene_package(root: str | Path, min_free_area_m2: float = 4.0) -> ScenePackage:

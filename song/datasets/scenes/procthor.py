@@ -27,9 +27,9 @@ per house (never silently). Everything outside the rooms is occupied.
 Fields read: ``rooms[].id/roomType/floorPolygon/floorMaterial``; ``walls[].id/polygon/empty/material``
 (the polygon's first two corners give the wall's ends and direction; the id's corners only when the
 polygon is missing); ``doors[].id/wall0/wall1/holePolygon``; ``objects[].assetId/position/rotation.y``.
-Deliberately ignored: ``windows[]`` (no effect on the floor plan; the dressing draws no window holes),
-an object's ``rotation.x/z`` (ProcTHOR's floor objects stand upright), ``kinematic`` (every floor
-object is an obstacle), ``children[]`` (objects on other objects: not floor obstacles), ``openness``
+``windows[].wall0/holePolygon`` become the scene's windows (glazing and daylight,
+:mod:`song.datasets.scenes.lights`; no effect on the floor plan). Deliberately ignored: an object's
+``rotation.x/z`` (ProcTHOR's floor objects stand upright), ``kinematic`` (every floor object is an obstacle), ``children[]`` (objects on other objects: not floor obstacles), ``openness``
 (a door is always passable, as a pedestrian opens it), ``room0/room1`` (the hole's wall says where it is),
 lights, skybox and ``metadata``.
 
@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from song.datasets.limits import limits
-from song.datasets.scenes.dressing import DressingHints, Opening
+from song.datasets.scenes.dressing import DressingHints, Opening, Window
 from song.datasets.scenes.materials import procthor_floor_material
 from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
 from song.datasets.scenes.package import write_scene_package
@@ -232,8 +232,8 @@ def _wall_ends(wall: dict) -> tuple[np.ndarray, np.ndarray]:
     return np.array([x0, z0]), np.array([x1, z1])
 
 
-def _hole_segments(house: dict, key: str) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
-    """``(id, a, b, top)`` for each door or window (``key``): its hole's ends along its wall, its top (m).
+def _hole_segments(house: dict, key: str) -> list[tuple[str, np.ndarray, np.ndarray, float, float]]:
+    """``(id, a, b, bottom, top)`` per door or window (``key``): its hole's ends along its wall, its bottom and top (m).
 
     The hole's x runs along ``wall0`` from the first corner of its polygon (see the module docstring);
     a hole whose ``wall0`` is not among the walls is measured along ``wall1`` from its far end.
@@ -254,7 +254,8 @@ def _hole_segments(house: dict, key: str) -> list[tuple[str, np.ndarray, np.ndar
         direction = (b - a) / max(np.linalg.norm(b - a), 1e-9)
         lo, hi = sorted((float(hole[0]["x"]), float(hole[1]["x"])))
         top = max(float(hole[0].get("y", 2.1)), float(hole[1].get("y", 2.1)))
-        out.append((str(item.get("id")), a + direction * lo, a + direction * hi, top))
+        bottom = min(float(hole[0].get("y", 0.0)), float(hole[1].get("y", 0.0)))
+        out.append((str(item.get("id")), a + direction * lo, a + direction * hi, bottom, top))
     return out
 
 
@@ -279,7 +280,12 @@ def _rgb_hex(colour: dict) -> str:
 
 def _hints(house: dict, room_ids: dict[str, str], wall: float) -> DressingHints:
     """Openings from the doors, floor materials per room, the most common wall paint, the wall height."""
-    openings = [Opening(tuple(a), tuple(b), top, wall) for _, a, b, top in _hole_segments(house, "doors")]
+    openings = [Opening(tuple(a), tuple(b), top, wall) for _, a, b, _, top in _hole_segments(house, "doors")]
+    windows = [
+        Window(tuple(float(v) for v in a), tuple(float(v) for v in b), round(z0, 3), round(z1, 3))
+        for _, a, b, z0, z1 in _hole_segments(house, "windows")
+        if z1 > z0 + 0.1
+    ]
     floors = {
         room_ids[room["id"]]: procthor_floor_material(room.get("floorMaterial", {}).get("name", ""))
         for room in house.get("rooms", [])
@@ -298,6 +304,7 @@ def _hints(house: dict, room_ids: dict[str, str], wall: float) -> DressingHints:
         floor_materials=floors,
         wall_material=max(set(paints), key=paints.count) if paints else None,
         ceiling_height_m=round(max(heights), 3) if heights else None,
+        windows=tuple(windows),
     )
 
 
@@ -328,7 +335,7 @@ def convert_house(
             continue
         a, b = _wall_ends(wall_def)
         raster.segment(a, b, wall, 0)
-    for _, a, b, _ in _hole_segments(house, "doors"):
+    for _, a, b, _, _ in _hole_segments(house, "doors"):
         raster.segment(a, b, wall + 2 * resolution, 255, caps=False)
     regions = []
     room_ids = {}

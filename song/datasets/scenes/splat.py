@@ -25,6 +25,7 @@ import math
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,6 +36,9 @@ from song.datasets.scenes.materials import texture
 from song.datasets.scenes.ply import SH_C0, GaussianCloud
 from song.geometry.freespace import clearance_field
 from song.util import derive_rng
+
+if TYPE_CHECKING:
+    from song.datasets.scenes.lighting import Bake
 
 SPACING_M = SURFEL_SPACING_M  # default surfel spacing (song.config, where the CLI reads it without this module)
 WIDTH_FACTOR = 0.6  # in-plane σ as a fraction of the local spacing (no holes from 0.3 m; edges bleed ≈ ½ spacing)
@@ -312,7 +316,10 @@ def frame_quats(t1: np.ndarray, t2: np.ndarray, n: np.ndarray) -> np.ndarray:
     return np.where(q[:, :1] < 0, -q, q)
 
 
-def _colour(s: _Samples, seed: int) -> np.ndarray:
+def _albedo(s: _Samples, seed: int, flat: bool = False) -> np.ndarray:
+    """Display-space albedo of each sample: its material's texture (``flat``: the material's base colour)."""
+    from song.datasets.scenes.materials import material_of
+
     colour = np.zeros((len(s.pos), 3))
     order = np.argsort(s.material, kind="stable")
     codes = np.unique(s.material)
@@ -320,13 +327,32 @@ def _colour(s: _Samples, seed: int) -> np.ndarray:
     for k, code in enumerate(codes):
         rows = order[bounds[k] : bounds[k + 1]]
         name = _MATERIAL_NAMES[code]
-        colour[rows] = texture(name, s.uv[rows, 0], s.uv[rows, 1], seed + zlib.crc32(name.encode()) % 65521)
+        if flat:
+            colour[rows] = material_of(name).base
+        else:
+            colour[rows] = texture(name, s.uv[rows, 0], s.uv[rows, 1], seed + zlib.crc32(name.encode()) % 65521)
+    return colour
+
+
+def _flat_shading(s: _Samples, albedo: np.ndarray) -> np.ndarray:
+    """The unlit look: a soft light from above and the procedural occlusion, in display space."""
     shade = AMBIENT + DIFFUSE * np.maximum(s.n @ LIGHT, 0.0)
-    return np.clip(colour * (shade * s.ao)[:, None], 0.0, 1.0)
+    return np.clip(albedo * (shade * s.ao)[:, None], 0.0, 1.0)
 
 
-def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M) -> GaussianCloud:
-    """Surfels over every visible surface of ``dressing`` (see the module docstring), seeded by its seed."""
+def synthesize_gaussians(
+    dressing: Dressing, spacing: float = SPACING_M, lighting: tuple | None = None, flat_materials: bool = False
+) -> tuple[GaussianCloud, Bake | None]:
+    """Surfels over every visible surface of ``dressing`` (see the module docstring), seeded by its seed.
+
+    ``lighting`` = ``(rig, triangles)`` bakes the rig's light with the proxy triangles (T, 3, 3) as
+    occluders (:func:`song.datasets.scenes.lighting.bake`); None keeps the unlit look.
+    ``flat_materials`` colours every surface with its material's base colour (no texture), as the
+    Cycles comparison needs. Returns the cloud and the bake (None when unlit).
+    """
+    from song.datasets.scenes.lighting import bake as bake_light
+    from song.datasets.scenes.materials import srgb_to_linear
+
     rng = derive_rng(dressing.seed, "splat", dressing.grid.shape, dressing.venue)
     boxes = [p for p in dressing.parts if p.kind == "box"]
     rounds = [p for p in dressing.parts if p.kind != "box"]
@@ -338,7 +364,15 @@ def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M) -> Gaus
             _round_parts(rounds, spacing, rng),
         ]
     )
-    colour = _colour(samples, dressing.seed)
+    albedo = _albedo(samples, dressing.seed, flat_materials)
+    baked = None
+    if lighting is None:
+        colour = _flat_shading(samples, albedo)
+    else:
+        rig, triangles = lighting
+        floor = (dressing.grid, dressing.floor_mask)
+        baked = bake_light(samples.pos, samples.n, srgb_to_linear(albedo), samples.ao, triangles, rig, floor)
+        colour = baked.colour
     quats = samples.quat
     thin = THIN_FACTOR * np.minimum(samples.s1, samples.s2) / WIDTH_FACTOR
     scales = np.column_stack([samples.s1, samples.s2, thin])
@@ -347,13 +381,14 @@ def synthesize_gaussians(dressing: Dressing, spacing: float = SPACING_M) -> Gaus
     span = cell.max(axis=0) + 1
     key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
     order = np.argsort(key, kind="stable")  # x-major cells; generation order within a cell
-    return GaussianCloud(
+    cloud = GaussianCloud(
         means=samples.pos[order].astype(np.float32),
         quats=quats[order].astype(np.float32),
         log_scales=np.log(scales[order]).astype(np.float32),
         opacity_logits=np.full(len(order), OPACITY_LOGIT, np.float32),
         sh_dc=((colour[order] - 0.5) / SH_C0).astype(np.float32),
     )
+    return cloud, baked
 
 
 @dataclass(frozen=True)
@@ -394,14 +429,32 @@ def _check_splat_count(root: Path, package, spacing: float) -> None:
         raise over(root, "spacing", f"{spacing} m spacing makes at least", estimate, "max_splats", SceneError)
 
 
+def proxy_triangles(solids, surfaces) -> np.ndarray:
+    """(T, 3, 3) triangles of the proxy meshes (the baker's occluders)."""
+    from song.datasets.scenes.usd import ProxyBox, box_mesh
+
+    meshes = [box_mesh(i, m) if isinstance(m, ProxyBox) else m for i, m in enumerate([*solids, *surfaces])]
+    if not meshes:
+        return np.zeros((0, 3, 3))
+    return np.concatenate([np.asarray(m.vertices, dtype=np.float64)[np.asarray(m.faces)] for m in meshes])
+
+
 def dress_package(
-    root: str | Path, hints: DressingHints | None = None, spacing: float = SPACING_M, seed: int | None = None
+    root: str | Path,
+    hints: DressingHints | None = None,
+    spacing: float = SPACING_M,
+    seed: int | None = None,
+    light: bool = True,
 ) -> DressResult:
     """Write a package's ``3dgs_compressed.ply`` and ``scene_flat.usda`` from its semantic map and occupancy.
 
     ``hints`` default to the ones stored in the package's USD proxy (none when it has no proxy), so a
     package made by the generator or the ProcTHOR importer is rebuilt exactly; ``seed`` replaces theirs.
+    ``light`` bakes the package's ``lights.json`` into the Gaussians (placing and writing the lights
+    first when the package has none; an existing file is never changed); the probe grid and the
+    exposure go into the USD proxy's metadata and the lights into it as ``UsdLux`` prims.
     """
+    from song.datasets.scenes.lights import LIGHTS_FILE, place_lights, read_lights, write_lights
     from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, load_scene_package
     from song.datasets.scenes.ply import write_compressed_ply
     from song.datasets.scenes.proxy import dressing_meshes, room_meshes
@@ -417,10 +470,20 @@ def dress_package(
         hints = dataclasses.replace(hints, seed=seed)
     _check_splat_count(root, package, spacing)
     dressing = build_dressing(package.semantic_map, package.occupancy, hints)
-    cloud = synthesize_gaussians(dressing, spacing)
-    write_compressed_ply(root / GAUSSIANS, cloud, viewer_frame=True)  # upright in SuperSplat and co.
     solids, surfaces = dressing_meshes(dressing, {o.id: o.category for o in package.semantic_map.objects})
-    write_usd_proxy(root / USD_PROXY, solids, surfaces, hints.to_json(), room_meshes(package.semantic_map))
+    rig, lighting = None, None
+    if light:
+        lights_path = root / LIGHTS_FILE
+        rig = read_lights(lights_path) if lights_path.is_file() else place_lights(dressing, package.semantic_map, hints)
+        lighting = (rig, proxy_triangles(solids, surfaces))
+    cloud, baked = synthesize_gaussians(dressing, spacing, lighting)
+    write_compressed_ply(root / GAUSSIANS, cloud, viewer_frame=True)  # upright in SuperSplat and co.
+    if rig is not None and not (root / LIGHTS_FILE).is_file():
+        write_lights(root / LIGHTS_FILE, rig)
+    write_usd_proxy(
+        root / USD_PROXY, solids, surfaces, hints.to_json(), room_meshes(package.semantic_map),
+        lights=rig.lights if rig else (), lighting_json=baked.probes.to_json() if baked and baked.probes else None,
+    )  # fmt: skip
     return DressResult(
         package.scene_id, len(cloud), (root / GAUSSIANS).stat().st_size / 1e6, (root / USD_PROXY).stat().st_size / 1e3
     )

@@ -29,6 +29,7 @@ from song.errors import FormatError, MissingDependencyError
 from song.util import write_text_atomic
 
 DRESSING_KEY = "song_dressing"
+LIGHTING_KEY = "song_lighting"
 # two triangles per side face + top + bottom, for points 0..3 at z_min and 4..7 at z_max
 PRISM_FACES = np.array(
     [
@@ -182,6 +183,8 @@ def write_usd_proxy(
     surfaces: list[ProxyMesh] = (),
     dressing_json: str | None = None,
     rooms: list[ProxyMesh] = (),
+    lights: list = (),
+    lighting_json: str | None = None,
 ) -> None:
     """Write ``scene_flat.usda`` (metersPerUnit 1, upAxis Z), atomically.
 
@@ -195,6 +198,8 @@ def write_usd_proxy(
         surfaces: floor and ceiling meshes (``/World/surfaces``).
         rooms: one flat labelled mesh per room (``/World/rooms``, purpose ``guide``).
         dressing_json: :class:`~song.datasets.scenes.dressing.DressingHints` JSON for the layer metadata.
+        lights: :class:`~song.datasets.scenes.lights.Light` s, written as ``UsdLux`` prims (``/World/lights``).
+        lighting_json: the baked :class:`~song.datasets.scenes.lighting.ProbeGrid` JSON for the layer metadata.
 
     Raises:
         MissingDependencyError: usd-core is not installed.
@@ -206,8 +211,10 @@ def write_usd_proxy(
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     world = UsdGeom.Xform.Define(stage, "/World")
     stage.SetDefaultPrim(world.GetPrim())
-    if dressing_json is not None:
-        stage.GetRootLayer().customLayerData = {DRESSING_KEY: dressing_json}
+    metadata = {DRESSING_KEY: dressing_json, LIGHTING_KEY: lighting_json}
+    metadata = {k: v for k, v in metadata.items() if v is not None}
+    if metadata:
+        stage.GetRootLayer().customLayerData = metadata
     from pxr import Gf, UsdPhysics
 
     physics = UsdPhysics.Scene.Define(stage, "/World/physicsScene")
@@ -231,9 +238,58 @@ def write_usd_proxy(
             prim = _define_mesh(stage, UsdGeom, Vt, f"/World/rooms/{_identifier(mesh.name, used)}", mesh)
             prim.CreatePurposeAttr(UsdGeom.Tokens.guide)
             decorator.decorate(prim, mesh, collider=False)
+    if lights:
+        _define_lights(stage, lights, used)
     text = stage.GetRootLayer().ExportToString()
     text = re.sub(r'\n    doc = "[^"]*"\n', "\n", text)  # no tool banner: bytes depend on the inputs only
     write_text_atomic(path, text)
+
+
+def _define_lights(stage, lights, used: set[str]) -> None:
+    """``UsdLux.RectLight`` (local −Z along the light's normal) and ``SphereLight`` prims, normalised off.
+
+    ``intensity`` is the emitted radiance (a rect light's, or a sphere's surface); ``song:role`` and
+    ``song:powerW`` keep SONG's description (``lights.json`` is the file the baker reads).
+    """
+    import math
+
+    from pxr import Gf, Sdf, UsdGeom, UsdLux
+
+    UsdGeom.Scope.Define(stage, "/World/lights")
+    for light in lights:
+        path = f"/World/lights/{_identifier(light.id, used)}"
+        if light.kind == "rect":
+            prim = UsdLux.RectLight.Define(stage, path)
+            prim.CreateWidthAttr(float(light.size[0]))
+            prim.CreateHeightAttr(float(light.size[1]))
+            u, v, n = light.frame()
+            x, y, z = u, -v, -n  # the light's local frame: it emits along −Z
+            intensity = light.radiance
+        else:
+            prim = UsdLux.SphereLight.Define(stage, path)
+            prim.CreateRadiusAttr(float(light.radius))
+            x, y, z = np.eye(3)
+            intensity = light.power_w / (4 * math.pi) / (math.pi * max(light.radius, 1e-3) ** 2)
+        matrix = Gf.Matrix4d(
+            *x.tolist(), 0.0, *y.tolist(), 0.0, *z.tolist(), 0.0, *[float(c) for c in light.position], 1.0
+        )
+        UsdGeom.Xformable(prim).AddTransformOp().Set(matrix)
+        prim.CreateIntensityAttr(float(intensity))
+        prim.CreateColorAttr(Gf.Vec3f(*[float(c) for c in light.colour]))
+        prim.CreateNormalizeAttr(False)
+        usd_prim = prim.GetPrim()
+        usd_prim.CreateAttribute("song:role", Sdf.ValueTypeNames.Token).Set(light.role)
+        usd_prim.CreateAttribute("song:powerW", Sdf.ValueTypeNames.Float).Set(float(light.power_w))
+
+
+def read_usd_lighting(path: str | Path) -> str | None:
+    """The baked probe grid's JSON from a proxy's layer metadata, or None (an unlit scene)."""
+    Sdf, Usd, UsdGeom, Vt = _pxr()
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    if layer is None:
+        raise FormatError(path, "", "not a readable USD layer")
+    value = dict(layer.customLayerData).get(LIGHTING_KEY)
+    return value if isinstance(value, str) else None
 
 
 def read_usd_dressing(path: str | Path) -> str | None:

@@ -1,0 +1,694 @@
+"""The light baker: irradiance at every scene surfel from the scene's lights, with shadows and bounces.
+
+Each surfel's colour becomes ``sRGB(clip(ρ · E / π · 2^EV))``: its albedo ρ (the material texture,
+linearised) times the irradiance E it receives, in linear light, then Cycles' "Standard" view (the
+exposure, then the sRGB transfer). E has three parts:
+
+- **direct, unshadowed**, per surfel and exact: a rectangle light by Lambert's polygon formula (the
+  rectangle clipped to the surfel's horizon), a point light by ``I cos θ / r²``;
+- **shadows**, per *texel* (the surfels of one 10 cm cell facing one of six axis directions): one
+  shadow ray per texel and light, towards a point on the light that changes from texel to texel (a
+  rank-1 lattice), cast through Embree (``embreex``) against the scene's proxy mesh. A surfel takes
+  the shadowed share of its own unshadowed light, interpolated trilinearly between the texels around
+  it (soft, ~10 cm penumbrae; exact where a surface is wholly lit or wholly in shadow);
+- **indirect** (diffuse inter-reflection), per 30 cm texel: 32 cosine-distributed rays gather the
+  radiance ``ρ E / π`` of the 10 cm texels they hit; the gather is iterated for three bounces (the
+  rays are cast once, the iterations reuse their hits). Three, because the indoor albedos here
+  (0.3–0.8) leave the fourth bounce under 3 % of the total (``benchmarks/lighting.py`` measures it);
+  Cycles traces until the path dies. The procedural ambient occlusion (contacts, inside corners,
+  undersides) scales this indirect part, which the 30 cm texels cannot resolve.
+
+Emitting surfaces are drawn, not lit: surfels inside a light's rectangle (a window's glazing on the
+wall, a ceiling panel on the ceiling, inset by a 5 cm frame) show its radiance. Every step is
+deterministic (fixed ray patterns, no threads in the ray casts), so a bake is byte-identical whatever
+the worker count.
+
+The baker also fills an **irradiance probe grid** (every 0.5 m over the floor, 1 m up): the mean
+irradiance over all orientations, direct (shadow-tested) and indirect, so that avatars are lit by the
+same light (:func:`probe_irradiance`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from song.datasets.scenes.lights import LightRig
+from song.datasets.scenes.materials import linear_to_srgb
+
+TEXEL_M = 0.10  # shadow cache cell
+COARSE_M = 0.30  # indirect cache cell
+GATHER_RAYS = 32
+BOUNCES = 3
+PROBE_SPACING_M, PROBE_HEIGHT_M, PROBE_RAYS = 0.5, 1.0, 48
+RAY_OFFSET_M = 0.02  # ray origins leave the surface along its normal by this much
+FRAME_M = 0.05  # a light's rectangle drawn inset by this frame
+MIDDLE_GREY = 0.18  # auto exposure: the median surface radiance maps to this
+DEPTH_M = 0.02  # texel cells' depth along their normal axis
+MINOR_SHARE = 0.01  # lights under this share of a texel's unshadowed light cast no shadow ray from it
+NEAR_FIELD = 8.0  # a rect light is integrated exactly within this many half-sizes (a point source beyond: < 0.5 % off)
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+_AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
+
+
+def tone(radiance: np.ndarray, exposure_ev: float) -> np.ndarray:
+    """Display values of linear ``radiance``: ×2^EV, clipped to [0, 1], sRGB-encoded (Cycles' "Standard" view)."""
+    return linear_to_srgb(np.clip(np.asarray(radiance, dtype=np.float64) * 2.0**exposure_ev, 0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class LightTable:
+    """A rig's lights as arrays for the kernels: kind (0 rect, 1 point), centre, u, v, n, half sizes, scale, colour.
+
+    ``scale`` is a rect light's radiance or a point light's intensity (W/sr).
+    """
+
+    kind: np.ndarray
+    centre: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    n: np.ndarray
+    half: np.ndarray
+    scale: np.ndarray
+    colour: np.ndarray
+    radius: np.ndarray
+
+    @classmethod
+    def of(cls, rig: LightRig) -> LightTable:
+        """The table of a rig."""
+        lights = rig.lights
+        k = len(lights)
+        frames = [light.frame() for light in lights]
+        def arr(f, width: int = 3) -> np.ndarray:
+            return np.array([f(i) for i in range(k)], dtype=np.float64).reshape(k, width)
+
+        return cls(
+            kind=np.array([0 if light.kind == "rect" else 1 for light in lights], dtype=np.int64),
+            centre=arr(lambda i: lights[i].position),
+            u=arr(lambda i: frames[i][0]),
+            v=arr(lambda i: frames[i][1]),
+            n=arr(lambda i: frames[i][2]),
+            half=arr(lambda i: (lights[i].size[0] / 2, lights[i].size[1] / 2), 2),
+            scale=np.array(
+                [light.radiance if light.kind == "rect" else light.power_w / (4 * math.pi) for light in lights]
+            ),
+            colour=arr(lambda i: lights[i].colour),
+            radius=np.array([light.radius for light in lights], dtype=np.float64),
+        )
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+
+# ---------------------------------------------------------------------------------------------- kernels
+
+
+@nb.njit(cache=True, fastmath=False)
+def _irradiance_one(p, nrm, kind, c, u, v, ln, half, scale, radius):
+    """Unshadowed irradiance at point ``p`` with normal ``nrm`` from one light (per unit of its colour)."""
+    dx, dy, dz = c[0] - p[0], c[1] - p[1], c[2] - p[2]
+    d2 = dx * dx + dy * dy + dz * dz
+    if kind == 1:
+        d2 = max(d2, radius * radius)
+        d = math.sqrt(d2)
+        cos_r = (nrm[0] * dx + nrm[1] * dy + nrm[2] * dz) / d
+        return scale * cos_r / d2 if cos_r > 0.0 else 0.0
+    front = -(ln[0] * dx + ln[1] * dy + ln[2] * dz)  # receiver's height over the light's plane
+    if front <= 0.0:
+        return 0.0
+    size = max(half[0], half[1])
+    if d2 > (NEAR_FIELD * size) ** 2:
+        d = math.sqrt(d2)
+        cos_r = (nrm[0] * dx + nrm[1] * dy + nrm[2] * dz) / d
+        if cos_r <= 0.0:
+            return 0.0
+        return scale * 4.0 * half[0] * half[1] * (front / d) * cos_r / d2
+    # Lambert's formula over the rectangle clipped to the receiver's upper half-space: the edges (or
+    # their parts) above the horizon, closed by the segment where the rectangle crosses it
+    total = 0.0
+    eps = 1e-9
+    ex = ey = ez = 0.0  # where the outline leaves the half-space
+    nx_ = ny_ = nz_ = 0.0  # where it comes back
+    crossed = False
+    for k in range(4):
+        j = (k + 1) % 4
+        ax, ay, az = _corner(k, dx, dy, dz, u, v, half)
+        bx, by, bz = _corner(j, dx, dy, dz, u, v, half)
+        ha = ax * nrm[0] + ay * nrm[1] + az * nrm[2]
+        hb = bx * nrm[0] + by * nrm[1] + bz * nrm[2]
+        if ha >= eps and hb >= eps:
+            total += _edge(ax, ay, az, bx, by, bz, nrm)
+        elif ha >= eps or hb >= eps:
+            t = (eps - ha) / (hb - ha)
+            cx, cy, cz = ax + t * (bx - ax), ay + t * (by - ay), az + t * (bz - az)
+            crossed = True
+            if ha >= eps:  # leaving
+                total += _edge(ax, ay, az, cx, cy, cz, nrm)
+                ex, ey, ez = cx, cy, cz
+            else:  # coming back
+                total += _edge(cx, cy, cz, bx, by, bz, nrm)
+                nx_, ny_, nz_ = cx, cy, cz
+    if crossed:
+        total += _edge(ex, ey, ez, nx_, ny_, nz_, nrm)
+    return scale * 0.5 * abs(total)
+
+
+@nb.njit(cache=True, inline="always")
+def _corner(k, dx, dy, dz, u, v, half):
+    su = -1.0 if k == 0 or k == 3 else 1.0
+    sv = -1.0 if k < 2 else 1.0
+    return (
+        dx + su * half[0] * u[0] + sv * half[1] * v[0],
+        dy + su * half[0] * u[1] + sv * half[1] * v[1],
+        dz + su * half[0] * u[2] + sv * half[1] * v[2],
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def _edge(ax, ay, az, bx, by, bz, nrm):
+    """One edge's term of Lambert's formula: its angle seen from the receiver times n · (its plane's normal)."""
+    la = math.sqrt(ax * ax + ay * ay + az * az)
+    lb = math.sqrt(bx * bx + by * by + bz * bz)
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    lc = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if lc < 1e-15 or la < 1e-15 or lb < 1e-15:
+        return 0.0
+    cosg = min(1.0, max(-1.0, (ax * bx + ay * by + az * bz) / (la * lb)))
+    return math.acos(cosg) * (cx * nrm[0] + cy * nrm[1] + cz * nrm[2]) / lc
+
+
+@nb.njit(cache=True, parallel=True)
+def _per_light(points, normals, kind, centre, u, v, n, half, scale, radius):
+    """(M, L) unshadowed irradiance of M receivers from L lights."""
+    out = np.zeros((len(points), len(kind)))
+    for i in nb.prange(len(points)):
+        for j in range(len(kind)):
+            out[i, j] = _irradiance_one(points[i], normals[i], kind[j], centre[j], u[j], v[j], n[j], half[j],
+                                        scale[j], radius[j])  # fmt: skip
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _trilinear(pos, bucket, keys, values, h, lo, dims):
+    """Values (K, C) of the cells ``keys`` (sorted) interpolated at ``pos`` between the 8 cells around it in its bucket.
+
+    Missing cells drop out (weights renormalised); the surfel's own cell always exists.
+    """
+    out = np.zeros((len(pos), values.shape[1]))
+    for i in nb.prange(len(pos)):
+        axis = bucket[i] // 2
+        fx = (pos[i, 0] - lo[0]) / (DEPTH_M if axis == 0 else h) - 0.5
+        fy = (pos[i, 1] - lo[1]) / (DEPTH_M if axis == 1 else h) - 0.5
+        fz = (pos[i, 2] - lo[2]) / (DEPTH_M if axis == 2 else h) - 0.5
+        bx, by, bz = math.floor(fx), math.floor(fy), math.floor(fz)
+        tx, ty, tz = fx - bx, fy - by, fz - bz
+        wsum = 0.0
+        for corner in range(8):
+            ox, oy, oz = corner & 1, (corner >> 1) & 1, (corner >> 2) & 1
+            w = (tx if ox else 1 - tx) * (ty if oy else 1 - ty) * (tz if oz else 1 - tz)
+            if w <= 0.0:
+                continue
+            ix, iy, iz = bx + ox, by + oy, bz + oz
+            if ix < 0 or iy < 0 or iz < 0 or ix >= dims[0] or iy >= dims[1] or iz >= dims[2]:
+                continue
+            key = ((ix * dims[1] + iy) * dims[2] + iz) * 6 + bucket[i]
+            k = np.searchsorted(keys, key)
+            if k < len(keys) and keys[k] == key:
+                for c in range(values.shape[1]):
+                    out[i, c] += w * values[k, c]
+                wsum += w
+        if wsum > 0.0:
+            for c in range(values.shape[1]):
+                out[i, c] /= wsum
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- texels
+
+
+def buckets(normals: np.ndarray) -> np.ndarray:
+    """Index (0..5) of the axis direction (+x, −x, +y, −y, +z, −z) nearest each normal."""
+    return np.argmax(normals @ _AXES.T, axis=1).astype(np.int64)
+
+
+@dataclass
+class Texels:
+    """Surfels grouped by (cell of ``h`` metres, normal bucket): sorted keys and per-texel means."""
+
+    h: float
+    lo: np.ndarray
+    dims: np.ndarray
+    keys: np.ndarray
+    index: np.ndarray  # texel of each surfel
+    pos: np.ndarray
+    normal: np.ndarray
+    count: np.ndarray
+
+    @classmethod
+    def of(cls, pos, normals, bucket, h: float, lo: np.ndarray, dims: np.ndarray, weight=None) -> Texels:
+        """Group points (surfels, or finer texels with their ``weight``) into texels of ``h`` m on the grid ``lo``, ``dims``."""
+        keys = cell_keys(pos, bucket, h, lo, dims)
+        uniq, index = np.unique(keys, return_inverse=True)
+        w = np.ones(len(pos)) if weight is None else np.asarray(weight, dtype=np.float64)
+        count = np.bincount(index, weights=w, minlength=len(uniq))
+        mean = lambda v: np.column_stack(  # noqa: E731
+            [np.bincount(index, weights=v[:, c] * w, minlength=len(uniq)) / np.maximum(count, 1e-12) for c in range(3)]
+        )
+        return cls(h, lo, dims, uniq, index, mean(pos), _unit(mean(normals)), count)
+
+    def centres(self) -> np.ndarray:
+        """(K, 3) where the interpolation places each texel's value: its cell's centre across its normal axis,
+        its surfels' mean along it (on the surface of a flat texel)."""
+        bucket = self.keys % 6
+        flat = self.keys // 6
+        cell = np.column_stack([flat // (self.dims[1] * self.dims[2]), (flat // self.dims[2]) % self.dims[1],
+                                flat % self.dims[2]])  # fmt: skip
+        out = self.lo + (cell + 0.5) * self.h
+        axis = bucket // 2
+        rows = np.arange(len(out))
+        out[rows, axis] = self.pos[rows, axis]
+        return out
+
+    def mean(self, values: np.ndarray) -> np.ndarray:
+        """Per-texel means of per-surfel ``values`` (N, C)."""
+        return mean_by(self.index, values, len(self.keys))
+
+    def lookup(self, pos: np.ndarray, bucket: np.ndarray) -> np.ndarray:
+        """The texel at each point and bucket, or −1."""
+        keys = cell_keys(pos, bucket, self.h, self.lo, self.dims)
+        k = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
+        return np.where(self.keys[k] == keys, k, -1)
+
+    def interpolate(self, pos: np.ndarray, bucket: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Per-texel ``values`` (K, C) interpolated at points in ``bucket`` (see :func:`_trilinear`)."""
+        return _trilinear(pos, bucket, self.keys, np.ascontiguousarray(values, dtype=np.float64), self.h,
+                          self.lo, self.dims)  # fmt: skip
+
+
+def cell_keys(pos: np.ndarray, bucket: np.ndarray, h: float, lo: np.ndarray, dims: np.ndarray) -> np.ndarray:
+    """int64 key of (cell, bucket); cells are ``h`` wide across the bucket's axis and :data:`DEPTH_M` along it.
+
+    The thin cells along the normal keep parallel faces a few centimetres apart (a trim on a wall's
+    end, a shelf board over another) in different texels.
+    """
+    axis = bucket // 2
+    step = np.full((len(pos), 3), h)
+    step[np.arange(len(pos)), axis] = DEPTH_M
+    cell = np.clip(np.floor((pos - lo) / step).astype(np.int64), 0, dims - 1)
+    return ((cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]) * 6 + bucket
+
+
+def mean_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
+    """Means of ``values`` rows grouped by ``index`` (0..k−1)."""
+    values = values.reshape(len(values), -1)
+    count = np.maximum(np.bincount(index, minlength=k), 1)
+    return np.column_stack(
+        [np.bincount(index, weights=values[:, c], minlength=k) / count for c in range(values.shape[1])]
+    )
+
+
+def sum_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
+    """(k, C) float sums of ``values`` (M, C) rows grouped by ``index`` (0..k−1)."""
+    return np.column_stack(
+        [np.bincount(index, weights=values[:, c], minlength=k).astype(np.float64) for c in range(values.shape[1])]
+    )
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
+
+
+# ---------------------------------------------------------------------------------------------- rays
+
+
+class Tracer:
+    """Embree ray queries against a triangle soup (``embreex``: Intel Embree's BVH; single-threaded, deterministic)."""
+
+    def __init__(self, triangles: np.ndarray) -> None:
+        from embreex import rtcore_scene as rtcs
+        from embreex.mesh_construction import TriangleMesh
+
+        self._scene = rtcs.EmbreeScene()
+        self.empty = len(triangles) == 0
+        if not self.empty:
+            TriangleMesh(self._scene, np.ascontiguousarray(triangles, dtype=np.float32))
+
+    def occluded(self, origins: np.ndarray, dirs: np.ndarray, dists: np.ndarray) -> np.ndarray:
+        """True where a segment ``origin + t·dir``, 0 < t < dist, hits a triangle."""
+        if self.empty or len(origins) == 0:
+            return np.zeros(len(origins), bool)
+        hit = self._scene.run(
+            np.ascontiguousarray(origins, dtype=np.float32), np.ascontiguousarray(dirs, dtype=np.float32),
+            query="OCCLUDED", dists=np.ascontiguousarray(dists, dtype=np.float32),
+        )  # fmt: skip
+        return np.asarray(hit) >= 0
+
+    def intersect(self, origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(distance or inf, hit, geometric normal (unit, facing the ray)) of the first hit along each ray."""
+        n = len(origins)
+        if self.empty or n == 0:
+            return np.full(n, np.inf), np.zeros(n, bool), np.zeros((n, 3))
+        res = self._scene.run(
+            np.ascontiguousarray(origins, dtype=np.float32), np.ascontiguousarray(dirs, dtype=np.float32), output=1
+        )
+        hit = np.asarray(res["geomID"]) >= 0
+        t = np.where(hit, np.asarray(res["tfar"], dtype=np.float64), np.inf)
+        ng = _unit(np.asarray(res["Ng"], dtype=np.float64))
+        ng = np.where(np.sum(ng * dirs, axis=1, keepdims=True) > 0, -ng, ng)
+        return t, hit, ng
+
+
+def _hemisphere(count: int) -> np.ndarray:
+    """``count`` cosine-distributed directions around +z (a Fibonacci spiral on the disc, lifted)."""
+    i = np.arange(count) + 0.5
+    r = np.sqrt(i / count)
+    a = i * math.pi * (3 - math.sqrt(5))
+    return np.column_stack([r * np.cos(a), r * np.sin(a), np.sqrt(np.maximum(0.0, 1 - r * r))])
+
+
+def _sphere(count: int) -> np.ndarray:
+    """``count`` directions spread evenly over the sphere (Fibonacci)."""
+    i = np.arange(count) + 0.5
+    z = 1 - 2 * i / count
+    a = i * math.pi * (3 - math.sqrt(5))
+    r = np.sqrt(1 - z * z)
+    return np.column_stack([r * np.cos(a), r * np.sin(a), z])
+
+
+def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.where(np.abs(normals[:, 2:3]) < 0.9, np.array([[0.0, 0, 1]]), np.array([[1.0, 0, 0]]))
+    t1 = _unit(np.cross(helper, normals))
+    return t1, np.cross(normals, t1)
+
+
+# ---------------------------------------------------------------------------------------------- the bake
+
+
+@dataclass(frozen=True)
+class ProbeGrid:
+    """Mean irradiance over all orientations (RGB, W/m²) on a horizontal grid at :data:`PROBE_HEIGHT_M`.
+
+    ``values[r, c]`` lies at ``origin + (c, r) · spacing``; ``exposure_ev`` is the scene's.
+    """
+
+    origin: tuple[float, float]
+    spacing: float
+    values: np.ndarray
+    exposure_ev: float
+
+    def to_json(self) -> str:
+        """Compact JSON (values rounded to 4 significant digits)."""
+        return json.dumps(
+            {
+                "origin": list(self.origin),
+                "spacing": self.spacing,
+                "shape": list(self.values.shape[:2]),
+                "exposure_ev": self.exposure_ev,
+                "values": [float(f"{v:.4g}") for v in self.values.ravel()],
+            },
+            separators=(",", ":"),
+        )
+
+    @classmethod
+    def from_json(cls, text: str) -> ProbeGrid:
+        """Inverse of :meth:`to_json`; ValueError on a malformed grid."""
+        data = json.loads(text)
+        rows, cols = (int(v) for v in data["shape"])
+        values = np.asarray(data["values"], dtype=np.float64).reshape(rows, cols, 3)
+        if not np.all(np.isfinite(values)) or (values < 0).any():
+            raise ValueError("probe values must be finite and ≥ 0")
+        return cls((float(data["origin"][0]), float(data["origin"][1])), float(data["spacing"]), values,
+                   float(data["exposure_ev"]))  # fmt: skip
+
+
+@dataclass
+class Bake:
+    """What :func:`bake` returns: per-surfel display colours and irradiance, the emitters' mask, the probes."""
+
+    colour: np.ndarray
+    irradiance: np.ndarray
+    emissive: np.ndarray
+    exposure_ev: float
+    probes: ProbeGrid | None
+
+
+def emissive_mask(pos: np.ndarray, normals: np.ndarray, table: LightTable) -> tuple[np.ndarray, np.ndarray]:
+    """Surfels drawn as a light's face: within 3 cm behind a rect light, inside it less a frame; (mask, light)."""
+    which = _emitters(pos, normals, table.kind, table.centre, table.u, table.v, table.n, table.half)
+    return which >= 0, which
+
+
+@nb.njit(cache=True, parallel=True)
+def _emitters(pos, normals, kind, centre, u, v, n, half):
+    which = np.full(len(pos), -1, dtype=np.int64)
+    for i in nb.prange(len(pos)):
+        for j in range(len(kind)):
+            if kind[j] != 0:
+                continue
+            dx, dy, dz = pos[i, 0] - centre[j, 0], pos[i, 1] - centre[j, 1], pos[i, 2] - centre[j, 2]
+            behind = -(dx * n[j, 0] + dy * n[j, 1] + dz * n[j, 2])
+            if behind <= -0.005 or behind >= 0.03:
+                continue
+            if normals[i, 0] * n[j, 0] + normals[i, 1] * n[j, 1] + normals[i, 2] * n[j, 2] <= 0.9:
+                continue
+            du = abs(dx * u[j, 0] + dy * u[j, 1] + dz * u[j, 2])
+            dv = abs(dx * v[j, 0] + dy * v[j, 1] + dz * v[j, 2])
+            if du < half[j, 0] - FRAME_M and dv < half[j, 1] - FRAME_M:
+                which[i] = j
+    return which
+
+
+def bake(
+    pos: np.ndarray,
+    normals: np.ndarray,
+    albedo: np.ndarray,
+    ao: np.ndarray,
+    triangles: np.ndarray,
+    rig: LightRig,
+    floor: tuple | None = None,
+) -> Bake:
+    """Light surfels (positions, unit normals, linear albedos (N, 3), ambient occlusion (N,)) by ``rig``.
+
+    ``triangles`` (T, 3, 3) is the occluding proxy mesh; ``floor`` = ``(grid, floor_mask)`` places the
+    probe grid (none without it).
+    """
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    normals = np.ascontiguousarray(_unit(np.asarray(normals, dtype=np.float64)))
+    table = LightTable.of(rig)
+    tracer = Tracer(triangles)
+    n = len(pos)
+    emissive, which = emissive_mask(pos, normals, table)
+    bucket = buckets(normals)
+    # an odd offset keeps the usual planes (z = 0, the ceiling, walls on grid lines) off the cell boundaries
+    lo = pos.min(axis=0) - 2 * COARSE_M - 0.0137 if n else np.zeros(3)
+    span = (pos.max(axis=0) + 2 * COARSE_M - lo) if n else np.ones(3)
+    dims = np.ceil(span / DEPTH_M).astype(np.int64) + 1  # bounds every axis at either cell size
+    fine = Texels.of(pos, normals, bucket, TEXEL_M, lo, dims)
+    fine_bucket = buckets(fine.normal)
+    fine_direct = _direct(fine, table, tracer) if len(table) and n else np.zeros((len(fine.keys), 3))
+    # emitters are counted as lights, not as reflectors
+    fine_albedo = fine.mean(np.where(emissive[:, None], 0.0, albedo))
+    coarse = Texels.of(fine.pos, fine.normal, fine_bucket, COARSE_M, lo, dims, fine.count)
+    parent = coarse.index
+    indirect_coarse = _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer)
+    fine_indirect = coarse.interpolate(fine.pos, fine_bucket, indirect_coarse)
+    both = fine.interpolate(pos, bucket, np.hstack([fine_direct, fine_indirect]))
+    direct, indirect = both[:, :3], both[:, 3:] * ao[:, None]
+    irradiance = direct + indirect
+    radiance = albedo * irradiance / math.pi
+    lum = radiance[~emissive] @ _LUMA
+    exposure = rig.exposure_ev
+    if exposure is None:
+        median = float(np.median(lum)) if len(lum) else 1.0
+        exposure = round(math.log2(MIDDLE_GREY / median), 2) if median > 0 else 0.0
+    colour = tone(radiance, exposure)
+    if emissive.any():
+        j = which[emissive]
+        colour[emissive] = tone(table.scale[j, None] * table.colour[j], exposure)
+    probes = None
+    if floor is not None:
+        probes = _probes(floor, table, tracer, fine, fine_direct, fine_albedo, indirect_coarse, parent, exposure)
+    return Bake(colour, irradiance, emissive, float(exposure), probes)
+
+
+def _direct(fine: Texels, table: LightTable, tracer: Tracer) -> np.ndarray:
+    """(K, 3) direct RGB irradiance at each fine texel, shadow-tested.
+
+    Lights giving a texel under :data:`MINOR_SHARE` of its unshadowed light cast no ray from it; they
+    take the shadowed share of the others.
+    """
+    origin = fine.pos + fine.normal * RAY_OFFSET_M
+    # the light is evaluated where the interpolation puts the value; shadow rays leave from the surfels' mean
+    e = _per_light(fine.centres() + fine.normal * RAY_OFFSET_M, fine.normal, table.kind, table.centre, table.u, table.v, table.n, table.half, table.scale,
+                   table.radius)  # fmt: skip
+    tex, light, dirs, dist = _shadow_rays(origin, e, MINOR_SHARE, table.kind, table.centre, table.u, table.v,
+                                          table.half, table.radius)  # fmt: skip
+    blocked = tracer.occluded(origin[tex], dirs, np.maximum(dist - RAY_OFFSET_M, 1e-4))
+    w = e[tex, light][:, None] * table.colour[light]
+    k = len(fine.keys)
+    num = sum_by(tex, w * ~blocked[:, None], k)
+    den = sum_by(tex, w, k)
+    ratio = np.where(den > 0, num / np.maximum(den, 1e-30), 1.0)
+    return (e @ table.colour) * ratio
+
+
+@nb.njit(cache=True, inline="always")
+def _light_point(j, index, kind, centre, u, v, half, radius):
+    """A point on light ``j`` picked by ``index`` on a rank-1 lattice (R2 sequence): over a rect, on a sphere."""
+    g = 1.32471795724474602596
+    i = index + 0.5
+    a = ((i / g) % 1.0) * 2 - 1
+    b = ((i / (g * g)) % 1.0) * 2 - 1
+    if kind[j] == 0:
+        return (
+            centre[j, 0] + a * half[j, 0] * u[j, 0] + b * half[j, 1] * v[j, 0],
+            centre[j, 1] + a * half[j, 0] * u[j, 1] + b * half[j, 1] * v[j, 1],
+            centre[j, 2] + a * half[j, 0] * u[j, 2] + b * half[j, 1] * v[j, 2],
+        )
+    r = math.sqrt(max(0.0, 1 - a * a))
+    t = math.pi * (b + 1)
+    return (
+        centre[j, 0] + radius[j] * r * math.cos(t),
+        centre[j, 1] + radius[j] * r * math.sin(t),
+        centre[j, 2] + radius[j] * a,
+    )
+
+
+@nb.njit(cache=True)
+def _shadow_rays(origin, e, minor, kind, centre, u, v, half, radius):
+    """(receiver, light, unit direction, distance) of one shadow ray per receiver and non-minor light."""
+    m, nl = e.shape
+    keep = np.zeros((m, nl), dtype=np.bool_)
+    count = 0
+    for i in range(m):
+        total = 0.0
+        for j in range(nl):
+            total += e[i, j]
+        for j in range(nl):
+            if e[i, j] > 0.0 and e[i, j] >= minor * total:
+                keep[i, j] = True
+                count += 1
+    tex = np.empty(count, dtype=np.int64)
+    light = np.empty(count, dtype=np.int64)
+    dirs = np.empty((count, 3))
+    dist = np.empty(count)
+    k = 0
+    for i in range(m):
+        for j in range(nl):
+            if not keep[i, j]:
+                continue
+            px, py, pz = _light_point(j, i * 7 + j, kind, centre, u, v, half, radius)
+            dx, dy, dz = px - origin[i, 0], py - origin[i, 1], pz - origin[i, 2]
+            d = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-12)
+            tex[k], light[k] = i, j
+            dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx / d, dy / d, dz / d
+            dist[k] = d
+            k += 1
+    return tex, light, dirs, dist
+
+
+def _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer) -> np.ndarray:
+    """(C, 3) indirect irradiance at the coarse texels after :data:`BOUNCES` bounces."""
+    k = len(coarse.keys)
+    dirs_local = _hemisphere(GATHER_RAYS)
+    t1, t2 = _frames(coarse.normal)
+    # a different turn of the pattern per texel: neighbours sample different directions
+    turn = (np.arange(k) * 0.61803398875 % 1.0) * 2 * math.pi
+    c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
+    dx, dy, dz = dirs_local[None, :, 0], dirs_local[None, :, 1], dirs_local[None, :, 2]
+    rx, ry = c * dx - s * dy, s * dx + c * dy
+    dirs = rx[..., None] * t1[:, None] + ry[..., None] * t2[:, None] + dz[..., None] * coarse.normal[:, None]
+    dirs = dirs.reshape(-1, 3)
+    origin = np.repeat(coarse.pos + coarse.normal * RAY_OFFSET_M, GATHER_RAYS, axis=0)
+    hit_fine = _hit_texels(origin, dirs, fine, tracer)
+    owner = np.repeat(np.arange(k), GATHER_RAYS)
+    return _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, np.zeros((k, 3)), GATHER_RAYS)
+
+
+def _hit_texels(origin, dirs, fine: Texels, tracer: Tracer) -> np.ndarray:
+    """The fine texel each ray hits (−1: none, or a surface without surfels)."""
+    t, hit, ng = tracer.intersect(origin, dirs)
+    point = origin + dirs * np.where(hit, t, 0.0)[:, None]
+    bucket = buckets(ng)
+    found = fine.lookup(point + ng * 0.004, bucket)
+    found = np.where(found < 0, fine.lookup(point - ng * 0.004, bucket), found)
+    return np.where(hit, found, -1)
+
+
+def _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, start, rays_per) -> np.ndarray:
+    """Bounce iterations of the gather: E_ind = mean over rays of ρ_hit (E_direct,hit + E_ind,parent(hit))."""
+    valid = hit_fine >= 0
+    o, h = owner[valid], hit_fine[valid]
+    counts = np.maximum(np.bincount(owner, minlength=k), 1).astype(np.float64)
+    indirect = start
+    for _ in range(BOUNCES):
+        radiance = fine_albedo[h] * (fine_direct[h] + indirect[parent[h]])
+        indirect = sum_by(o, radiance, k) / counts[:, None]
+    return indirect
+
+
+def _probes(floor, table, tracer, fine, fine_direct, fine_albedo, indirect_coarse, parent, exposure) -> ProbeGrid:
+    grid, floor_mask = floor
+    x0, y0 = grid.origin
+    rows_m, cols_m = grid.shape[0] * grid.resolution, grid.shape[1] * grid.resolution
+    gx = np.arange(x0, x0 + cols_m + 1e-9, PROBE_SPACING_M)
+    gy = np.arange(y0, y0 + rows_m + 1e-9, PROBE_SPACING_M)
+    xx, yy = np.meshgrid(gx, gy)
+    xy = np.column_stack([xx.ravel(), yy.ravel()])
+    rc = grid.to_cell(xy)
+    inside = (rc[:, 0] >= 0) & (rc[:, 0] < grid.shape[0]) & (rc[:, 1] >= 0) & (rc[:, 1] < grid.shape[1])
+    ok = np.zeros(len(xy), bool)
+    ok[inside] = floor_mask[rc[inside, 0], rc[inside, 1]]
+    pts = np.column_stack([xy[ok], np.full(ok.sum(), PROBE_HEIGHT_M)])
+    m = len(pts)
+    values = np.zeros((len(xy), 3))
+    if m:
+        direct = np.zeros((m, 3))
+        if len(table):
+            e = np.zeros((m, len(table)))
+            for axis in _AXES:
+                e += _per_light(pts, np.tile(axis, (m, 1)), table.kind, table.centre, table.u, table.v, table.n,
+                                table.half, table.scale, table.radius) / 6  # fmt: skip
+            p, light, dirs_l, dist = _shadow_rays(pts, e, 0.0, table.kind, table.centre, table.u, table.v, table.half,
+                                                  table.radius)  # fmt: skip
+            blocked = tracer.occluded(pts[p], dirs_l, np.maximum(dist - 0.01, 1e-4))
+            w = e[p, light][:, None] * table.colour[light] * ~blocked[:, None]
+            direct = sum_by(p, w, m)
+        dirs = np.tile(_sphere(PROBE_RAYS), (m, 1))
+        origin = np.repeat(pts, PROBE_RAYS, axis=0)
+        hit_fine = _hit_texels(origin, dirs, fine, tracer)
+        valid = hit_fine >= 0
+        h = hit_fine[valid]
+        radiance = fine_albedo[h] * (fine_direct[h] + indirect_coarse[parent[h]]) / math.pi
+        owner = np.repeat(np.arange(m), PROBE_RAYS)[valid]
+        mean_l = sum_by(owner, radiance, m) / PROBE_RAYS
+        values[ok] = direct + math.pi * mean_l
+    values = values.reshape(len(gy), len(gx), 3)
+    if ok.any() and not ok.all():  # off-floor probes take their nearest floor probe's value
+        from scipy.ndimage import distance_transform_edt
+
+        _, (ri, ci) = distance_transform_edt(~ok.reshape(len(gy), len(gx)), return_indices=True)
+        values = values[ri, ci]
+    return ProbeGrid((float(gx[0]), float(gy[0])), PROBE_SPACING_M, values.astype(np.float32), float(exposure))
+
+
+def probe_irradiance(probes: ProbeGrid, xy: np.ndarray) -> np.ndarray:
+    """Bilinearly interpolated probe irradiance (M, 3) at points ``xy`` (M, 2) (clamped to the grid)."""
+    rows, cols = probes.values.shape[:2]
+    f = (np.asarray(xy, dtype=np.float64) - np.asarray(probes.origin)) / probes.spacing
+    fx = np.clip(f[:, 0], 0, cols - 1)
+    fy = np.clip(f[:, 1], 0, rows - 1)
+    x0, y0 = (
+        np.minimum(np.floor(fx).astype(int), cols - 2 if cols > 1 else 0),
+        np.minimum(np.floor(fy).astype(int), rows - 2 if rows > 1 else 0),
+    )
+    x1, y1 = np.minimum(x0 + 1, cols - 1), np.minimum(y0 + 1, rows - 1)
+    tx, ty = (fx - x0)[:, None], (fy - y0)[:, None]
+    v = probes.values.astype(np.float64)
+    return (v[y0, x0] * (1 - tx) + v[y0, x1] * tx) * (1 - ty) + (v[y1, x0] * (1 - tx) + v[y1, x1] * tx) * ty

@@ -1,0 +1,198 @@
+"""The light baker: physical falloff, shadows, a reference twin, determinism, the package's lights file."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from song.datasets.scenes.lighting import (
+    ProbeGrid,
+    _irradiance_one,
+    bake,
+    probe_irradiance,
+)
+from song.datasets.scenes.lights import LIGHTS_FILE, Light, LightRig, read_lights, write_lights
+from song.datasets.scenes.package import GAUSSIANS, USD_PROXY, load_scene_package
+from song.datasets.scenes.ply import read_gaussian_ply
+from song.datasets.scenes.splat import dress_package
+from song.errors import SceneError
+from song.render import render, robot_camera
+from song.runtime.vision import scene_gaussians
+
+WHITE = (1.0, 1.0, 1.0)
+
+
+def _plane(half: float, spacing: float, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Surfel positions and normals (up) on a square, and its two triangles."""
+    g = np.arange(-half + spacing / 2, half, spacing)
+    xx, yy = np.meshgrid(g, g)
+    pos = np.column_stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)])
+    return pos, np.tile([0.0, 0.0, 1.0], (len(pos), 1))
+
+
+def _quad(half: float, z: float = 0.0) -> np.ndarray:
+    a, b, c, d = [(-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)]
+    return np.array([[a, b, c], [a, c, d]], dtype=np.float64)
+
+
+def _box(lo, hi) -> np.ndarray:
+    """12 triangles of an axis-aligned box."""
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    v = np.array([[x, y, z] for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)], dtype=np.float64)
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+             (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]  # fmt: skip
+    return v[np.array(faces)]
+
+
+def _point(power: float, position) -> Light:
+    return Light(id="bulb", kind="point", role="lamp", position=position, power_w=power, colour=WHITE)
+
+
+def test_point_light_over_a_plane_falls_off_as_cos_over_r_squared() -> None:
+    pos, normals = _plane(3.0, 0.035)
+    height, power = 2.0, 100.0
+    rig = LightRig(lights=[_point(power, (0.0, 0.0, height))], exposure_ev=0.0)
+    result = bake(pos, normals, np.full((len(pos), 3), 0.5), np.ones(len(pos)), _quad(3.2), rig)
+    r = np.linalg.norm(pos - [0, 0, height], axis=1)
+    expected = power / (4 * math.pi) * (height / r) / r**2
+    away = np.abs(pos[:, :2]).max(axis=1) < 2.8  # the trilinear interpolation drops cells past the edge
+    ratio = result.irradiance[away, 1] / expected[away]
+    assert np.abs(ratio - 1).max() < 0.02, (ratio.min(), ratio.max())
+    assert np.allclose(result.irradiance[:, 0], result.irradiance[:, 2])  # a white light stays white
+
+
+def test_a_box_casts_a_shadow_and_occluded_surfels_get_no_direct_light() -> None:
+    pos, normals = _plane(3.0, 0.035)
+    light = (0.0, 0.0, 2.5)
+    box_lo, box_hi = (-0.4, -0.4, 1.0), (0.4, 0.4, 1.2)
+    rig = LightRig(lights=[_point(100.0, light)], exposure_ev=0.0)
+    tris = np.concatenate([_quad(3.2), _box(box_lo, box_hi)])
+    result = bake(pos, normals, np.zeros((len(pos), 3)), np.ones(len(pos)), tris, rig)  # black: no bounce
+    # the shadow of a point light: the box's top face projected from the light onto the floor
+    edge = 0.4 * light[2] / (light[2] - box_hi[2])
+    reach = np.abs(pos[:, :2]).max(axis=1)
+    umbra = reach < edge - 0.12  # a texel's width inside the edge
+    lit = reach > edge + 0.12
+    assert umbra.sum() > 100 and np.all(result.irradiance[umbra] == 0.0)
+    r = np.linalg.norm(pos - light, axis=1)
+    expected = 100.0 / (4 * math.pi) * (light[2] / r) / r**2
+    lit &= np.abs(pos[:, :2]).max(axis=1) < 2.8
+    assert np.allclose(result.irradiance[lit, 0], expected[lit], rtol=0.02)
+
+
+def test_rect_light_formula_matches_a_brute_force_integral() -> None:
+    """Lambert's polygon formula (clipped to the horizon) against a dense sum over the emitter's area."""
+    rng = np.random.default_rng(3)
+    light = Light(id="panel", kind="rect", role="ceiling", position=(0.2, -0.1, 2.0), normal=(0, 0, -1),
+                  u_axis=(1, 0, 0), size=(0.6, 0.4), power_w=40.0, colour=WHITE)  # fmt: skip
+    u, v, n = light.frame()
+    c = np.asarray(light.position)
+    k = 400
+    a, b = np.meshgrid((np.arange(k) + 0.5) / k - 0.5, (np.arange(k) + 0.5) / k - 0.5)
+    samples = c + a.reshape(-1, 1) * light.size[0] * u + b.reshape(-1, 1) * light.size[1] * v
+    d_area = light.area / len(samples)
+    for _ in range(12):
+        p = rng.uniform([-1, -1, 0], [1, 1, 1.9])
+        normal = rng.normal(size=3)
+        normal /= np.linalg.norm(normal)
+        d = samples - p
+        r = np.linalg.norm(d, axis=1)
+        cos_r = np.maximum(d @ normal / r, 0)
+        cos_e = np.maximum(-(d @ n) / r, 0)
+        reference = light.radiance * np.sum(cos_e * cos_r / r**2) * d_area
+        got = _irradiance_one(p, normal, 0, c, u, v, n, np.array(light.size) / 2, light.radiance, 0.0)
+        assert got == pytest.approx(reference, rel=0.01, abs=1e-3), (p, normal)
+
+
+def test_light_changes_colour_only_depth_is_unchanged(make_scene, tmp_path: Path) -> None:
+    root = make_scene()
+    dress_package(root, light=False)
+    unlit = read_gaussian_ply(root / GAUSSIANS)
+    dress_package(root)
+    lit = read_gaussian_ply(root / GAUSSIANS)
+    for field in ("means", "quats", "log_scales", "opacity_logits"):
+        assert np.array_equal(getattr(lit, field), getattr(unlit, field)), field
+    assert not np.array_equal(lit.sh_dc, unlit.sh_dc)
+    camera = robot_camera(2.0, 1.0, 0.0, 0.8, 70.0, 160, 120)
+    a = render(scene_gaussians(root / GAUSSIANS), camera)
+    dress_package(root, light=False)
+    b = render(scene_gaussians(root / GAUSSIANS), camera)
+    assert np.array_equal(a.depth, b.depth)
+
+
+def test_lights_are_written_read_back_edited_and_rebaked(make_scene) -> None:
+    root = make_scene()
+    dress_package(root)
+    rig = read_lights(root / LIGHTS_FILE)
+    assert rig.lights and {light.role for light in rig.lights} >= {"ceiling"}
+    text = (root / USD_PROXY).read_text()
+    assert text.count("def RectLight") + text.count("def SphereLight") == len(rig.lights)
+    first = read_gaussian_ply(root / GAUSSIANS).sh_dc.copy()
+    # an edit survives a re-bake (the file is never rewritten) and changes the colours
+    dimmer = rig.model_copy(update={"exposure_ev": -1.0})
+    write_lights(root / LIGHTS_FILE, dimmer)
+    dress_package(root)
+    assert read_lights(root / LIGHTS_FILE) == dimmer
+    assert not np.array_equal(read_gaussian_ply(root / GAUSSIANS).sh_dc, first)
+    load_scene_package(root)  # the package still validates
+
+
+@pytest.mark.parametrize(
+    ("patch", "field"),
+    [
+        ({"lights": [{"id": "a", "kind": "rect", "role": "ceiling", "position": [0, 0, 2], "power_w": 1}]}, "lights.0"),
+        ({"exposure_ev": float("nan")}, "exposure_ev"),
+        ({"version": 7}, "version"),
+        ({"lights": [{"id": "a", "kind": "point", "role": "lamp", "position": [0, 0, 2], "power_w": -1}]}, "power_w"),
+    ],
+)
+def test_bad_lights_file_names_the_file_and_field(make_scene, patch: dict, field: str) -> None:
+    root = make_scene()
+    data = {"format": "song.lights", "version": 1, "exposure_ev": None, "lights": []}
+    data.update(patch)
+    (root / LIGHTS_FILE).write_text(json.dumps(data).replace("NaN", "1e999"))
+    with pytest.raises(SceneError) as info:
+        load_scene_package(root)
+    assert LIGHTS_FILE in str(info.value) and field in str(info.value)
+
+
+def _ply_hash(root: Path) -> str:
+    return hashlib.sha256((root / GAUSSIANS).read_bytes()).hexdigest()
+
+
+def test_bake_is_identical_whatever_the_thread_count(make_scene) -> None:
+    root = make_scene()
+    dress_package(root)
+    here = _ply_hash(root)
+    (root / GAUSSIANS).unlink()
+    code = f"from song.datasets.scenes.splat import dress_package; dress_package({str(root)!r})"
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    subprocess.run([sys.executable, "-c", code], check=True, env=env, timeout=300)
+    assert _ply_hash(root) == here
+
+
+def test_probe_grid_lights_avatars_where_the_scene_is_lit(make_scene) -> None:
+    from song.datasets.scenes.usd import read_usd_lighting
+
+    root = make_scene()
+    dress_package(root)
+    probes = ProbeGrid.from_json(read_usd_lighting(root / USD_PROXY))
+    package = load_scene_package(root)
+    free = package.occupancy.to_world(np.argwhere(package.occupancy.free)[::50])
+    e = probe_irradiance(probes, free)
+    assert np.all(np.isfinite(e)) and np.all(e > 0)
+    # a light switched off leaves the probes dark (no light from nowhere)
+    rig = read_lights(root / LIGHTS_FILE)
+    write_lights(root / LIGHTS_FILE, rig.model_copy(update={"lights": [], "exposure_ev": 0.0}))
+    dress_package(root)
+    dark = ProbeGrid.from_json(read_usd_lighting(root / USD_PROXY))
+    assert np.all(dark.values == 0)
