@@ -67,6 +67,7 @@ def policy_view(episode: Episode, sensors: tuple[str, ...]) -> Episode:
         pedestrians=[],
         avatars=[],
         gaussians_path=None,
+        usd_path=None,
         factors={},
         reference_ped_id=-1,
         encounter_time=float("nan"),

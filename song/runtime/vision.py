@@ -8,6 +8,12 @@ root lies within the camera's range and field of view (plus a body's width of ma
 (:func:`song.render.render`). Pedestrians without an avatar cache are drawn as their collision body
 proxy (grey 2 cm splats filling the proxy body), so a camera still sees every person. One render per
 step serves every camera sensor of that resolution.
+
+In a lit scene (its USD proxy carries the baker's probe grid, :mod:`song.datasets.scenes.lighting`)
+each avatar is shaded by the light where it stands: its colours, read as albedos, are multiplied by
+the probes' mean irradiance at its root (bilinear) and the scene's exposure, then tone-mapped as the
+scene's surfels were; and it casts a soft contact shadow (one flat dark Gaussian on the floor under
+it). An unlit scene shows the avatars' colours as they are.
 """
 
 from __future__ import annotations
@@ -22,7 +28,10 @@ from song import plugins
 from song.datasets.avatars.asset import load_avatar
 from song.datasets.avatars.cache import PosedAvatar, load_compact_cache
 from song.datasets.bench.types import Episode, pedestrian_states
+from song.datasets.scenes.lighting import ProbeGrid, probe_irradiance
+from song.datasets.scenes.materials import linear_to_srgb, srgb_to_linear
 from song.datasets.scenes.ply import read_gaussian_ply
+from song.errors import BenchmarkError
 from song.geometry.rotations import wrap_angle
 from song.render import GaussianSet, RenderOutput, render, robot_camera
 from song.render.gaussians import SH_C0
@@ -33,6 +42,10 @@ AVATAR_MARGIN_M = 1.0  # a posed avatar reaches this far from its root (arms, ha
 PROXY_SIGMA_M = 0.02  # splat size of a body proxy point
 PROXY_GREY = 0.55  # colour of a body proxy
 SCENE_CACHE = 2  # scenes kept activated per process
+SHADOW_SIGMA_M, SHADOW_OPACITY = 0.22, 0.45  # the contact shadow under a lit avatar
+_TONE_STEPS = 4096
+# the sRGB transfer as a lookup table, straight to SH DC coefficients
+_TONE_DC = ((linear_to_srgb(np.linspace(0.0, 1.0, _TONE_STEPS + 1)) - 0.5) / SH_C0).astype(np.float32)
 
 
 def scene_gaussians(path: Path | None) -> GaussianSet:
@@ -45,6 +58,31 @@ def scene_gaussians(path: Path | None) -> GaussianSet:
     )
 
 
+def scene_probes(usd_path: Path | None) -> ProbeGrid | None:
+    """The baked light's probe grid from a scene's USD proxy, or None (no proxy, an unlit scene)."""
+    if usd_path is None:
+        return None
+    from song.datasets.scenes.usd import read_usd_lighting
+
+    text = read_usd_lighting(usd_path)
+    if text is None:
+        return None
+    try:
+        return ProbeGrid.from_json(text)
+    except (ValueError, KeyError, TypeError, IndexError) as exc:
+        raise BenchmarkError(f"{usd_path}: customLayerData.song_lighting: malformed probe grid ({exc})") from exc
+
+
+def contact_shadows(roots: np.ndarray) -> GaussianSet:
+    """One flat, dark, half-transparent Gaussian on the floor under each root (M, 2)."""
+    m = len(roots)
+    means = np.column_stack([roots, np.full(m, 0.004)]).astype(np.float32)
+    quats = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (m, 1))
+    scales = np.tile(np.array([SHADOW_SIGMA_M, SHADOW_SIGMA_M, 0.002], np.float32), (m, 1))
+    sh = np.full((m, 1, 3), -0.5 / SH_C0, np.float32)
+    return GaussianSet(means, quats, scales, np.full(m, SHADOW_OPACITY, np.float32), sh)
+
+
 @dataclass
 class _Avatar:
     """A pedestrian's avatar prepared for per-step posing (static attributes activated once)."""
@@ -54,6 +92,21 @@ class _Avatar:
     opacities: np.ndarray
     sh: np.ndarray
     proxy: np.ndarray | None = None  # (M, 3) canonical proxy points when there is no avatar cache
+    lit: tuple | None = None  # (light factor, SH) of the last shading
+    albedo: np.ndarray | None = None  # (N, 3) linear albedos read from the DC colours, made on first shading
+
+    def shaded(self, factor: np.ndarray) -> np.ndarray:
+        """SH coefficients with the DC colour lit by ``factor`` (RGB: irradiance / π · 2^EV), tone-mapped."""
+        key = tuple(np.round(factor, 3))
+        if self.lit is None or self.lit[0] != key:
+            if self.albedo is None:
+                dc = np.clip(0.5 + SH_C0 * self.sh[:, 0, :].astype(np.float64), 0.0, 1.0)
+                self.albedo = (srgb_to_linear(dc) * _TONE_STEPS).astype(np.float32)
+            index = np.minimum(self.albedo * np.asarray(key, np.float32), _TONE_STEPS).astype(np.int32)
+            sh = self.sh.copy()
+            sh[:, 0, :] = _TONE_DC[index]
+            self.lit = (key, sh)
+        return self.lit[1]
 
 
 def _prepare(asset_path: Path | None, cache_path: Path | None) -> _Avatar:
@@ -118,6 +171,7 @@ class SceneView:
         self.camera_model = camera_model
         self._model: object | None = None
         self._scenes: dict[Path | None, GaussianSet] = {}
+        self._probes: dict[Path | None, ProbeGrid | None] = {}
         self._episode: Episode | None = None
         self._avatars: dict[int, _Avatar] = {}
         self._last: tuple[tuple, RenderOutput] | None = None
@@ -129,6 +183,10 @@ class SceneView:
             if len(self._scenes) >= SCENE_CACHE:
                 self._scenes.pop(next(iter(self._scenes)))
             self._scenes[key] = scene_gaussians(key)
+        if episode.usd_path not in self._probes:
+            if len(self._probes) >= SCENE_CACHE:
+                self._probes.pop(next(iter(self._probes)))
+            self._probes[episode.usd_path] = scene_probes(episode.usd_path)
         self._episode = episode
         self._avatars = {}
         self._last = None
@@ -157,10 +215,18 @@ class SceneView:
         return out
 
     def posed_avatars(self, indices: list[int], t: float) -> list[GaussianSet]:
-        """The avatars of pedestrians ``indices`` posed at ``t`` (positions and rotations by LBS)."""
+        """The avatars of pedestrians ``indices`` posed at ``t`` (positions and rotations by LBS).
+
+        In a lit scene they are shaded by the probes and each brings its contact shadow.
+        """
         sets = []
         tracks = self._episode.pedestrians
-        for k in indices:
+        probes = self._probes.get(self._episode.usd_path)
+        if probes is not None and indices:
+            _, roots, _ = pedestrian_states([tracks[k] for k in indices], t)
+            factors = probe_irradiance(probes, roots) / math.pi * 2.0**probes.exposure_ev
+            sets.append(contact_shadows(roots))
+        for j, k in enumerate(indices):
             avatar = self._avatar(k)
             if avatar.posed is not None:
                 means, quats = avatar.posed.pose_at(t)
@@ -173,7 +239,8 @@ class SceneView:
                     [c * pts[:, 0] - s * pts[:, 1] + xy[0, 0], s * pts[:, 0] + c * pts[:, 1] + xy[0, 1], pts[:, 2]]
                 )
                 quats = np.tile(np.array([1.0, 0.0, 0.0, 0.0], np.float32), (len(pts), 1))
-            sets.append(GaussianSet(means, quats, avatar.scales, avatar.opacities, avatar.sh))
+            sh = avatar.sh if probes is None else avatar.shaded(factors[j])
+            sets.append(GaussianSet(means, quats, avatar.scales, avatar.opacities, sh))
         return sets
 
     def render(

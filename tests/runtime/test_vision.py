@@ -63,3 +63,38 @@ def test_lbs_posed_avatar_appears_where_the_crowd_put_it(make_scene, tmp_path: P
     again = SceneView(backend="numba")
     again.reset(ep)
     assert (again.render(pose, t, W, H).rgb == view.render(pose, t, W, H).rgb).all()
+
+
+def test_avatars_take_the_scene_light_and_cast_a_contact_shadow(make_scene) -> None:
+    """In a lit scene a person is shaded by the probes where they stand and darkens the floor below them."""
+    from song.datasets.scenes.lights import LIGHTS_FILE, read_lights, write_lights
+    from song.datasets.scenes.package import USD_PROXY
+    from song.datasets.scenes.splat import dress_package
+
+    root = make_scene()
+    dress_package(root)
+    ped = track(7, (2.5, 2.0), (2.5, 1.99), speed=0.01)  # standing still in room A
+    pose = Pose(0.6, 2.0, 0.0)
+    unlit = SceneView(backend="numba")
+    unlit.reset(episode(start=(0.6, 2.0), peds=[ped]))
+    lit = SceneView(backend="numba")
+    lit.reset(replace(episode(start=(0.6, 2.0), peds=[ped]), usd_path=root / USD_PROXY))
+    a, b = unlit.posed_avatars([0], 0.0), lit.posed_avatars([0], 0.0)
+    assert len(a) == 1 and len(b) == 2  # the lit one brings its shadow
+    shadow = b[0]
+    assert np.allclose(shadow.means[0, :2], [2.5, 2.0], atol=0.02) and shadow.means[0, 2] < 0.01
+    # the body's colours change with the light, its shape does not
+    assert np.array_equal(a[0].means, b[1].means) and not np.array_equal(a[0].sh, b[1].sh)
+    # twice the light: brighter (the exposure is fixed by the file, so the light alone changes)
+    rig = read_lights(root / LIGHTS_FILE)
+    brighter = [light.model_copy(update={"power_w": 2 * light.power_w}) for light in rig.lights]
+    ev = lit._probes[root / USD_PROXY].exposure_ev
+    write_lights(root / LIGHTS_FILE, rig.model_copy(update={"lights": brighter, "exposure_ev": ev}))
+    dress_package(root)
+    lit2 = SceneView(backend="numba")
+    lit2.reset(replace(episode(start=(0.6, 2.0), peds=[ped]), usd_path=root / USD_PROXY))
+    c = lit2.posed_avatars([0], 0.0)
+    grey = lambda s: float(np.mean(0.5 + 0.282 * s.sh[:, 0, :]))  # noqa: E731
+    assert grey(c[1]) > grey(b[1]) + 0.02
+    out = lit.render(pose, 0.0, W, H)
+    assert np.isfinite(out.depth).any()

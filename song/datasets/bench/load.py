@@ -287,6 +287,7 @@ class Benchmark:
             factors=factors,
             params=self.params,
             gaussians_path=self.blob(self._scenes[scene_id]["gaussians"]),
+            usd_path=self.blob(self._scenes[scene_id].get("usd")),
             split=row.get("split") or "test",
             reference_ped_id=int(row.get("reference_ped_id", -1)),
             encounter_time=float("nan") if row.get("encounter_time") is None else float(row["encounter_time"]),

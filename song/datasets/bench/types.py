@@ -123,6 +123,8 @@ class Episode:
         avatars: avatar bindings, one per pedestrian that has one.
         params: the runtime parameters the episode is run with (the release's, unless overridden).
         gaussians_path: the scene's Gaussian PLY inside the release, or None when it has none.
+        usd_path: the scene's USD proxy inside the release (its metadata carries the baked light's
+            probe grid, which lights the avatars), or None.
         split: the split of the episode's scene ("train", "val", "test", …; "test" before schema 1.3).
         reference_ped_id: the pedestrian the sampling mode is about (co/counter-directional: the one
             whose walk the robot follows or meets; encounter: the walking one passed within 1 m); -1
@@ -150,6 +152,7 @@ class Episode:
     factors: dict[str, float] = field(default_factory=dict)
     params: RuntimeParams = field(default_factory=RuntimeParams)
     gaussians_path: Path | None = None
+    usd_path: Path | None = None
     split: str = "test"
     reference_ped_id: int = -1
     encounter_time: float = float("nan")

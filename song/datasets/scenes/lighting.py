@@ -4,19 +4,21 @@ Each surfel's colour becomes ``sRGB(clip(ρ · E / π · 2^EV))``: its albedo ρ
 linearised) times the irradiance E it receives, in linear light, then Cycles' "Standard" view (the
 exposure, then the sRGB transfer). E has three parts:
 
-- **direct, unshadowed**, per surfel and exact: a rectangle light by Lambert's polygon formula (the
-  rectangle clipped to the surfel's horizon), a point light by ``I cos θ / r²``;
-- **shadows**, per *texel* (the surfels of one 10 cm cell facing one of six axis directions): one
-  shadow ray per texel and light, towards a point on the light that changes from texel to texel (a
-  rank-1 lattice), cast through Embree (``embreex``) against the scene's proxy mesh. A surfel takes
-  the shadowed share of its own unshadowed light, interpolated trilinearly between the texels around
-  it (soft, ~10 cm penumbrae; exact where a surface is wholly lit or wholly in shadow);
+- **direct**, per *texel* (the surfels of one 10 cm cell, 2 cm deep along the normal, facing one of
+  six axis directions): a rectangle light by Lambert's polygon formula (the rectangle clipped to the
+  texel's horizon; a point source beyond 8 half-sizes), a point light by ``I cos θ / r²``, each times
+  its visibility: one shadow ray per texel and light, towards a point on the light that changes
+  from texel to texel (a rank-1 lattice), cast through Embree (``embreex``) against the scene's proxy
+  mesh. Lights giving a texel under 1 % of its light cast no ray and take the others' shadowed
+  share. A surfel's value is interpolated trilinearly between the texels around it (soft ~10 cm
+  penumbrae);
 - **indirect** (diffuse inter-reflection), per 30 cm texel: 32 cosine-distributed rays gather the
-  radiance ``ρ E / π`` of the 10 cm texels they hit; the gather is iterated for three bounces (the
-  rays are cast once, the iterations reuse their hits). Three, because the indoor albedos here
-  (0.3–0.8) leave the fourth bounce under 3 % of the total (``benchmarks/lighting.py`` measures it);
-  Cycles traces until the path dies. The procedural ambient occlusion (contacts, inside corners,
-  undersides) scales this indirect part, which the 30 cm texels cannot resolve.
+  radiance ``ρ E / π`` of the 10 cm texels they hit (a proxy face without surfels: the nearest texel
+  facing the same way). The rays are cast once and kept as a sparse matrix; bounces are products
+  with it, iterated until one adds under 0.5 % (indoor albedos of 0.3–0.8 need 6–12: three bounces
+  would leave about a tenth of the light out, ``benchmarks/lighting.py`` measures it). The procedural
+  ambient occlusion (contacts, inside corners, undersides), which the 30 cm texels cannot resolve,
+  scales this indirect part.
 
 Emitting surfaces are drawn, not lit: surfels inside a light's rectangle (a window's glazing on the
 wall, a ceiling panel on the ceiling, inset by a 5 cm frame) show its radiance. Every step is
@@ -43,7 +45,9 @@ from song.datasets.scenes.materials import linear_to_srgb
 TEXEL_M = 0.10  # shadow cache cell
 COARSE_M = 0.30  # indirect cache cell
 GATHER_RAYS = 32
-BOUNCES = 3
+BOUNCES = 32  # at most; the gather stops when a bounce adds under BOUNCE_TOLERANCE
+BOUNCE_TOLERANCE = 0.005
+ORIENTATION_M = 0.3  # in the nearest-texel search, a reversed normal weighs as much as 0.6 m
 PROBE_SPACING_M, PROBE_HEIGHT_M, PROBE_RAYS = 0.5, 1.0, 48
 RAY_OFFSET_M = 0.02  # ray origins leave the surface along its normal by this much
 FRAME_M = 0.05  # a light's rectangle drawn inset by this frame
@@ -83,6 +87,7 @@ class LightTable:
         lights = rig.lights
         k = len(lights)
         frames = [light.frame() for light in lights]
+
         def arr(f, width: int = 3) -> np.ndarray:
             return np.array([f(i) for i in range(k)], dtype=np.float64).reshape(k, width)
 
@@ -263,8 +268,10 @@ class Texels:
         return cls(h, lo, dims, uniq, index, mean(pos), _unit(mean(normals)), count)
 
     def centres(self) -> np.ndarray:
-        """(K, 3) where the interpolation places each texel's value: its cell's centre across its normal axis,
-        its surfels' mean along it (on the surface of a flat texel)."""
+        """(K, 3) where the interpolation places each texel's value.
+
+        Its cell's centre across its normal axis, its surfels' mean along it (on a flat texel's surface).
+        """
         bucket = self.keys % 6
         flat = self.keys // 6
         cell = np.column_stack([flat // (self.dims[1] * self.dims[2]), (flat // self.dims[2]) % self.dims[1],
@@ -612,24 +619,46 @@ def _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer) -> np.ndarra
 
 
 def _hit_texels(origin, dirs, fine: Texels, tracer: Tracer) -> np.ndarray:
-    """The fine texel each ray hits (−1: none, or a surface without surfels)."""
+    """The fine texel each ray hits (−1: it escapes).
+
+    The texel of the hit's cell and face orientation; where that cell has no surfels (a proxy face the
+    Gaussians skip, a cell boundary), the nearest texel facing the same way.
+    """
     t, hit, ng = tracer.intersect(origin, dirs)
     point = origin + dirs * np.where(hit, t, 0.0)[:, None]
     bucket = buckets(ng)
     found = fine.lookup(point + ng * 0.004, bucket)
     found = np.where(found < 0, fine.lookup(point - ng * 0.004, bucket), found)
+    missing = np.flatnonzero(hit & (found < 0))
+    if len(missing) and len(fine.keys):
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(np.hstack([fine.pos, ORIENTATION_M * fine.normal]))
+        _, nearest = tree.query(np.hstack([point[missing], ORIENTATION_M * ng[missing]]))
+        found[missing] = nearest
     return np.where(hit, found, -1)
 
 
 def _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, start, rays_per) -> np.ndarray:
-    """Bounce iterations of the gather: E_ind = mean over rays of ρ_hit (E_direct,hit + E_ind,parent(hit))."""
+    """Bounce iterations of the gather: E_ind = mean over rays of ρ_hit (E_direct,hit + E_ind,parent(hit)).
+
+    The rays are a sparse (coarse texel × fine texel) matrix, so a bounce is one product; iterated
+    until a bounce adds under :data:`BOUNCE_TOLERANCE` of the indirect light (at most :data:`BOUNCES`).
+    """
+    from scipy.sparse import csr_matrix
+
     valid = hit_fine >= 0
-    o, h = owner[valid], hit_fine[valid]
-    counts = np.maximum(np.bincount(owner, minlength=k), 1).astype(np.float64)
+    gather = csr_matrix(
+        (np.full(int(valid.sum()), 1.0 / rays_per), (owner[valid], hit_fine[valid])), shape=(k, len(fine_direct))
+    )
     indirect = start
     for _ in range(BOUNCES):
-        radiance = fine_albedo[h] * (fine_direct[h] + indirect[parent[h]])
-        indirect = sum_by(o, radiance, k) / counts[:, None]
+        radiance = fine_albedo * (fine_direct + indirect[parent])
+        new = gather @ radiance
+        change = float(np.abs(new - indirect).sum()) / max(float(new.sum()), 1e-30)
+        indirect = new
+        if change < BOUNCE_TOLERANCE:
+            break
     return indirect
 
 

@@ -136,10 +136,30 @@ def dressing_meshes(
         if poly.geom_type != "Polygon" or poly.area <= grid.resolution**2:
             continue
         surfaces += [
-            _labelled(flat(f"floor_{k}", poly, 0.0, True), dressing.default_floor, "floor"),
-            _labelled(flat(f"ceiling_{k}", poly, dressing.ceiling_height, False), "ceiling", "ceiling"),
+            _labelled(flat(f"floor_{k}_{j}", piece, 0.0, True), material, "floor")
+            for j, (piece, material) in enumerate(_floor_pieces(dressing, poly))
         ]
+        surfaces.append(_labelled(flat(f"ceiling_{k}", poly, dressing.ceiling_height, False), "ceiling", "ceiling"))
     return solids, surfaces
+
+
+def _floor_pieces(dressing: Dressing, poly) -> list[tuple[object, str]]:
+    """``poly`` cut by the regions: (piece, floor material) with the material the Gaussians use there."""
+    from shapely.geometry.polygon import orient
+
+    pieces, rest = [], poly
+    for region, material in dressing.regions:
+        if rest.is_empty:
+            break
+        pieces.append((rest.intersection(region), material))
+        rest = rest.difference(region)
+    pieces.append((rest, dressing.default_floor))
+    out = []
+    for shape, material in pieces:
+        for part in getattr(shape, "geoms", [shape]):
+            if part.geom_type == "Polygon" and part.area > 1e-4:
+                out.append((orient(part, 1.0), material))
+    return out
 
 
 def room_meshes(semantic_map) -> list[ProxyMesh]:
