@@ -102,8 +102,10 @@ def test_viz_pov_writes_an_h264_video_and_a_strip(tmp_path: Path) -> None:
 
 def test_viz_view_renders_a_room(tmp_path: Path) -> None:
     from song.datasets.scenes.generate import generate_scene
+    from song.datasets.scenes.splat import dress_package
 
-    root = generate_scene("office_0000", "office", 1, tmp_path / "scenes", True, 0.1)
+    root = generate_scene("office_0000", "office", 1, tmp_path / "scenes", False, 0.1)
+    dress_package(root, spacing=0.1, light=False)  # evenly lit: a dark pixel can only be the void
     out = tmp_path / "view.png"
     result = CliRunner().invoke(app, ["viz", "view", str(root), "--out", str(out), "--resolution", "160x90"])
     assert result.exit_code == 0, result.output

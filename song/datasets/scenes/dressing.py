@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from song.datasets.scenes.clutter import source_items, surface_items, wall_decor
 from song.datasets.scenes.furniture import Part, object_frame, object_parts
 from song.datasets.scenes.materials import floor_material, wall_material
 from song.datasets.scenes.model import SemanticMap
@@ -59,6 +60,18 @@ class Window:
 
 
 @dataclass(frozen=True)
+class Item:
+    """A source's small object standing on another or hanging (ProcTHOR's ``children[]``): an oriented box, m."""
+
+    kind: str
+    centre: tuple[float, float]
+    yaw: float
+    half: tuple[float, float]
+    z0: float
+    z1: float
+
+
+@dataclass(frozen=True)
 class DressingHints:
     """What a scene's source knows beyond its package files (stored in the USD proxy's layer metadata).
 
@@ -70,6 +83,8 @@ class DressingHints:
         seed: the dressing seed (furniture variants, textures, sample jitter).
         windows: the source's windows (ProcTHOR's); None: windows by rule on exterior walls
             (:func:`song.datasets.scenes.lights.rule_windows`).
+        items: the source's small objects on other objects (:mod:`song.datasets.scenes.clutter`).
+        clutter: dress the scene with clutter (items on tops and shelves, pictures and signs).
     """
 
     openings: tuple[Opening, ...] = ()
@@ -78,6 +93,8 @@ class DressingHints:
     ceiling_height_m: float | None = None
     seed: int = 0
     windows: tuple[Window, ...] | None = None
+    items: tuple[Item, ...] = ()
+    clutter: bool = True
 
     def to_json(self) -> str:
         """Canonical JSON text."""
@@ -97,9 +114,21 @@ class DressingHints:
             wall_material=data.get("wall_material"),
             ceiling_height_m=data.get("ceiling_height_m"),
             seed=int(data.get("seed", 0)),
+            clutter=bool(data.get("clutter", True)),
             windows=None
             if data.get("windows") is None
             else tuple(Window(tuple(w["a"]), tuple(w["b"]), float(w["z0"]), float(w["z1"])) for w in data["windows"]),
+            items=tuple(
+                Item(
+                    str(i["kind"]),
+                    tuple(i["centre"]),
+                    float(i["yaw"]),
+                    tuple(i["half"]),
+                    float(i["z0"]),
+                    float(i["z1"]),
+                )
+                for i in data.get("items", [])
+            ),
         )
 
 
@@ -270,15 +299,19 @@ def build_dressing(smap: SemanticMap, grid: OccupancyGrid, hints: DressingHints 
     ceiling = float(hints.ceiling_height_m or CEILING_HEIGHT_M)
     room = clearance_field(grid.free, grid.resolution)
     parts: list[Part] = []
+    region_types = {r.id: r.type for r in smap.regions}
     for obj in smap.objects:
         footprint = np.asarray(obj.footprint, dtype=np.float64)
         frame = object_frame(footprint, _wall_side(footprint, room, grid))
         lift = obj.z_min if obj.z_min > HANGING_MIN_M else 0.0
+        own = []
         for part in object_parts(obj.id, obj.label, obj.category, frame, obj.z_max - lift, venue, seed):
             if lift:
                 part = Part(part.name, part.group, part.kind, part.centre, part.yaw, part.half, part.z0 + lift,
                             part.z1 + lift, part.material, tuple(h for h in part.hidden if h != "bottom"))  # fmt: skip
-            parts.append(part)
+            own.append(part)
+        region_type = region_types.get(obj.region or "", "")
+        parts += surface_items(obj.id, obj.label, obj.category, region_type, own, venue, seed) if hints.clutter else own
     for index, opening in enumerate(hints.openings):
         parts += opening_parts(index, opening, ceiling)
         side = _outside_side(opening, floor_mask, grid)
@@ -289,7 +322,7 @@ def build_dressing(smap: SemanticMap, grid: OccupancyGrid, hints: DressingHints 
         (Polygon(region.polygon), hints.floor_materials.get(region.id) or floor_material(region.type, venue))
         for region in smap.regions
     ]
-    return Dressing(
+    dressing = Dressing(
         grid=grid,
         venue=venue,
         walls=_wall_polygons(wall_mask, grid),
@@ -302,3 +335,21 @@ def build_dressing(smap: SemanticMap, grid: OccupancyGrid, hints: DressingHints 
         wall_material=hints.wall_material or wall_material(venue),
         seed=seed,
     )
+    if hints.clutter:
+        if hints.windows is None:
+            from song.datasets.scenes.lights import rule_windows
+
+            windows = [_light_segment(light) for light in rule_windows(dressing, hints.openings)]
+        else:
+            windows = [(w.a, w.b) for w in hints.windows]
+        # a source with its own small objects (ProcTHOR's paintings among them) gets no pictures by rule
+        decor = source_items(hints.items) if hints.items else wall_decor(dressing, hints.openings, windows, seed)
+        dressing.parts += decor
+    return dressing
+
+
+def _light_segment(light) -> tuple[np.ndarray, np.ndarray]:
+    """The wall segment a window light covers."""
+    u, _, _ = light.frame()
+    c = np.asarray(light.position[:2])
+    return c - u[:2] * light.size[0] / 2, c + u[:2] * light.size[0] / 2

@@ -6,17 +6,18 @@ exposure, then the sRGB transfer). E has three parts:
 
 - **direct**, per *texel* (the surfels of one 10 cm cell, 2 cm deep along the normal, facing one of
   six axis directions): a rectangle light by Lambert's polygon formula (the rectangle clipped to the
-  texel's horizon; a point source beyond 8 half-sizes), a point light by ``I cos θ / r²``, each times
+  texel's horizon; a point source beyond 6 half-sizes), a point light by ``I cos θ / r²``, each times
   its visibility: one shadow ray per texel and light, towards a point on the light that changes
   from texel to texel (a rank-1 lattice), cast through Embree (``embreex``) against the scene's proxy
   mesh. Lights giving a texel under 1 % of its light cast no ray and take the others' shadowed
   share. A surfel's value is interpolated trilinearly between the texels around it (soft ~10 cm
   penumbrae);
 - **indirect** (diffuse inter-reflection), per 30 cm texel: 32 cosine-distributed rays gather the
-  radiance ``ρ E / π`` of the 10 cm texels they hit (a proxy face without surfels: the nearest texel
-  facing the same way). The rays are cast once and kept as a sparse matrix; bounces are products
+  radiance ``ρ E / π`` of the 10 cm texels they hit (a proxy face without surfels: the largest texel
+  of the 30 cm one there). The rays are cast once and kept as a sparse matrix; bounces are products
   with it, iterated until one adds under 0.5 % (indoor albedos of 0.3–0.8 need 6–12: three bounces
-  would leave about a tenth of the light out, ``benchmarks/lighting.py`` measures it). The procedural
+  would leave about a tenth of the light out, ``benchmarks/lighting.py`` measures it), then blurred
+  along each surface (two passes of a 3 × 3 binomial filter over its texels). The procedural
   ambient occlusion (contacts, inside corners, undersides), which the 30 cm texels cannot resolve,
   scales this indirect part.
 
@@ -47,14 +48,17 @@ COARSE_M = 0.30  # indirect cache cell
 GATHER_RAYS = 32
 BOUNCES = 32  # at most; the gather stops when a bounce adds under BOUNCE_TOLERANCE
 BOUNCE_TOLERANCE = 0.005
-ORIENTATION_M = 0.3  # in the nearest-texel search, a reversed normal weighs as much as 0.6 m
 PROBE_SPACING_M, PROBE_HEIGHT_M, PROBE_RAYS = 0.5, 1.0, 48
 RAY_OFFSET_M = 0.02  # ray origins leave the surface along its normal by this much
 FRAME_M = 0.05  # a light's rectangle drawn inset by this frame
 MIDDLE_GREY = 0.18  # auto exposure: the median surface radiance maps to this
 DEPTH_M = 0.02  # texel cells' depth along their normal axis
-MINOR_SHARE = 0.01  # lights under this share of a texel's unshadowed light cast no shadow ray from it
-NEAR_FIELD = 8.0  # a rect light is integrated exactly within this many half-sizes (a point source beyond: < 0.5 % off)
+MINOR_SHARE = 0.01
+LARGE_LIGHT_M2, MAX_SHADOW_RAYS = (
+    0.2,
+    8,
+)  # a rect light casts one shadow ray per this area from each texel, ≤ 8  # lights under this share of a texel's unshadowed light cast no shadow ray from it
+NEAR_FIELD = 6.0  # a rect light is integrated exactly within this many half-sizes (a point source beyond: < 1 % off)
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 _AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
 
@@ -282,6 +286,36 @@ class Texels:
         out[rows, axis] = self.pos[rows, axis]
         return out
 
+    def blur(self, values: np.ndarray, passes: int = 2) -> np.ndarray:
+        """``values`` (K, C) smoothed across each texel's surface, ``passes`` times.
+
+        A [1 2 1]² filter over its in-plane neighbours that exist (same bucket and depth cell).
+        """
+        bucket = self.keys % 6
+        flat = self.keys // 6
+        d1, d2 = self.dims[1], self.dims[2]
+        cell = np.column_stack([flat // (d1 * d2), (flat // d2) % d1, flat % d2])
+        axis = bucket // 2
+        a1, a2 = (axis + 1) % 3, (axis + 2) % 3
+        rows = np.arange(len(cell))
+        neighbours, weights = [], []
+        for o1 in (-1, 0, 1):
+            for o2 in (-1, 0, 1):
+                c = cell.copy()
+                c[rows, a1] += o1
+                c[rows, a2] += o2
+                key = ((c[:, 0] * d1 + c[:, 1]) * d2 + c[:, 2]) * 6 + bucket
+                k = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
+                found = self.keys[k] == key
+                neighbours.append(np.where(found, k, rows))
+                weights.append(np.where(found, (2 - abs(o1)) * (2 - abs(o2)), 0.0))
+        weights = np.array(weights, dtype=np.float64)
+        weights /= weights.sum(axis=0)
+        out = values
+        for _ in range(passes):
+            out = sum(w[:, None] * out[n] for n, w in zip(neighbours, weights, strict=True))
+        return out
+
     def mean(self, values: np.ndarray) -> np.ndarray:
         """Per-texel means of per-surfel ``values`` (N, C)."""
         return mean_by(self.index, values, len(self.keys))
@@ -503,7 +537,8 @@ def bake(
     fine_albedo = fine.mean(np.where(emissive[:, None], 0.0, albedo))
     coarse = Texels.of(fine.pos, fine.normal, fine_bucket, COARSE_M, lo, dims, fine.count)
     parent = coarse.index
-    indirect_coarse = _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer)
+    # the gather's noise (32 rays a texel) blurred along the surfaces: indirect light varies slowly
+    indirect_coarse = coarse.blur(_gather(coarse, fine, fine_direct, fine_albedo, parent, tracer))
     fine_indirect = coarse.interpolate(fine.pos, fine_bucket, indirect_coarse)
     both = fine.interpolate(pos, bucket, np.hstack([fine_direct, fine_indirect]))
     direct, indirect = both[:, :3], both[:, 3:] * ao[:, None]
@@ -520,7 +555,7 @@ def bake(
         colour[emissive] = tone(table.scale[j, None] * table.colour[j], exposure)
     probes = None
     if floor is not None:
-        probes = _probes(floor, table, tracer, fine, fine_direct, fine_albedo, indirect_coarse, parent, exposure)
+        probes = _probes(floor, table, tracer, fine, coarse, fine_direct, fine_albedo, indirect_coarse, exposure)
     return Bake(colour, irradiance, emissive, float(exposure), probes)
 
 
@@ -531,9 +566,10 @@ def _direct(fine: Texels, table: LightTable, tracer: Tracer) -> np.ndarray:
     take the shadowed share of the others.
     """
     origin = fine.pos + fine.normal * RAY_OFFSET_M
-    # the light is evaluated where the interpolation puts the value; shadow rays leave from the surfels' mean
-    e = _per_light(fine.centres() + fine.normal * RAY_OFFSET_M, fine.normal, table.kind, table.centre, table.u, table.v, table.n, table.half, table.scale,
-                   table.radius)  # fmt: skip
+    # the light is evaluated on the surface where the interpolation puts the value (off it, a ceiling or a
+    # wall would see the panel or window set just before it); shadow rays leave from above the surfels' mean
+    e = _per_light(fine.centres(), fine.normal, table.kind, table.centre, table.u, table.v, table.n, table.half,
+                   table.scale, table.radius)  # fmt: skip
     tex, light, dirs, dist = _shadow_rays(origin, e, MINOR_SHARE, table.kind, table.centre, table.u, table.v,
                                           table.half, table.radius)  # fmt: skip
     blocked = tracer.occluded(origin[tex], dirs, np.maximum(dist - RAY_OFFSET_M, 1e-4))
@@ -613,16 +649,16 @@ def _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer) -> np.ndarra
     dirs = rx[..., None] * t1[:, None] + ry[..., None] * t2[:, None] + dz[..., None] * coarse.normal[:, None]
     dirs = dirs.reshape(-1, 3)
     origin = np.repeat(coarse.pos + coarse.normal * RAY_OFFSET_M, GATHER_RAYS, axis=0)
-    hit_fine = _hit_texels(origin, dirs, fine, tracer)
+    hit_fine = _hit_texels(origin, dirs, fine, coarse, tracer)
     owner = np.repeat(np.arange(k), GATHER_RAYS)
     return _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, np.zeros((k, 3)), GATHER_RAYS)
 
 
-def _hit_texels(origin, dirs, fine: Texels, tracer: Tracer) -> np.ndarray:
-    """The fine texel each ray hits (−1: it escapes).
+def _hit_texels(origin, dirs, fine: Texels, coarse: Texels, tracer: Tracer) -> np.ndarray:
+    """The fine texel each ray hits (−1: it escapes, or hits a surface without surfels around).
 
     The texel of the hit's cell and face orientation; where that cell has no surfels (a proxy face the
-    Gaussians skip, a cell boundary), the nearest texel facing the same way.
+    Gaussians skip, a cell boundary), the largest fine texel of the coarse texel there.
     """
     t, hit, ng = tracer.intersect(origin, dirs)
     point = origin + dirs * np.where(hit, t, 0.0)[:, None]
@@ -630,12 +666,13 @@ def _hit_texels(origin, dirs, fine: Texels, tracer: Tracer) -> np.ndarray:
     found = fine.lookup(point + ng * 0.004, bucket)
     found = np.where(found < 0, fine.lookup(point - ng * 0.004, bucket), found)
     missing = np.flatnonzero(hit & (found < 0))
-    if len(missing) and len(fine.keys):
-        from scipy.spatial import cKDTree
-
-        tree = cKDTree(np.hstack([fine.pos, ORIENTATION_M * fine.normal]))
-        _, nearest = tree.query(np.hstack([point[missing], ORIENTATION_M * ng[missing]]))
-        found[missing] = nearest
+    if len(missing):
+        largest = np.full(len(coarse.keys), -1)
+        order = np.argsort(fine.count, kind="stable")
+        largest[coarse.index[order]] = order  # the last write per coarse texel is its largest fine texel
+        for sign in (1.0, -1.0):
+            ck = coarse.lookup(point[missing] + sign * ng[missing] * 0.004, bucket[missing])
+            found[missing] = np.where((found[missing] < 0) & (ck >= 0), largest[np.maximum(ck, 0)], found[missing])
     return np.where(hit, found, -1)
 
 
@@ -662,8 +699,9 @@ def _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, start, rays_p
     return indirect
 
 
-def _probes(floor, table, tracer, fine, fine_direct, fine_albedo, indirect_coarse, parent, exposure) -> ProbeGrid:
+def _probes(floor, table, tracer, fine, coarse, fine_direct, fine_albedo, indirect_coarse, exposure) -> ProbeGrid:
     grid, floor_mask = floor
+    parent = coarse.index
     x0, y0 = grid.origin
     rows_m, cols_m = grid.shape[0] * grid.resolution, grid.shape[1] * grid.resolution
     gx = np.arange(x0, x0 + cols_m + 1e-9, PROBE_SPACING_M)
@@ -691,7 +729,7 @@ def _probes(floor, table, tracer, fine, fine_direct, fine_albedo, indirect_coars
             direct = sum_by(p, w, m)
         dirs = np.tile(_sphere(PROBE_RAYS), (m, 1))
         origin = np.repeat(pts, PROBE_RAYS, axis=0)
-        hit_fine = _hit_texels(origin, dirs, fine, tracer)
+        hit_fine = _hit_texels(origin, dirs, fine, coarse, tracer)
         valid = hit_fine >= 0
         h = hit_fine[valid]
         radiance = fine_albedo[h] * (fine_direct[h] + indirect_coarse[parent[h]]) / math.pi

@@ -65,6 +65,14 @@ MATERIALS: dict[str, Material] = {
         Material("books", (0.50, 0.30, 0.25), "books"),
         Material("stone", (0.66, 0.64, 0.60), "tiles"),
         Material("door_panel", (0.46, 0.33, 0.22), "wood"),
+        Material("paper", (0.93, 0.93, 0.90), "fabric"),
+        Material("cardboard", (0.64, 0.50, 0.34), "fabric"),
+        Material("canvas_ochre", (0.78, 0.62, 0.32), "fabric"),
+        Material("canvas_teal", (0.24, 0.48, 0.50), "fabric"),
+        Material("canvas_rose", (0.76, 0.47, 0.47), "fabric"),
+        Material("canvas_sky", (0.55, 0.68, 0.82), "fabric"),
+        Material("sign_green", (0.10, 0.48, 0.26), "metal"),
+        Material("sign_blue", (0.14, 0.30, 0.58), "metal"),
     )
 }
 

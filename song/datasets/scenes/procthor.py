@@ -26,10 +26,13 @@ per house (never silently). Everything outside the rooms is occupied.
 
 Fields read: ``rooms[].id/roomType/floorPolygon/floorMaterial``; ``walls[].id/polygon/empty/material``
 (the polygon's first two corners give the wall's ends and direction; the id's corners only when the
-polygon is missing); ``doors[].id/wall0/wall1/holePolygon``; ``objects[].assetId/position/rotation.y``.
+polygon is missing); ``doors[].id/wall0/wall1/holePolygon``; ``objects[].assetId/position/rotation.y``
+(floor objects are obstacles; objects standing higher up and ``objects[].children[]``, the objects
+placed on others, become small items of the dressing, seen but not obstacles,
+:mod:`song.datasets.scenes.clutter`).
 ``windows[].wall0/holePolygon`` become the scene's windows (glazing and daylight,
 :mod:`song.datasets.scenes.lights`; no effect on the floor plan). Deliberately ignored: an object's
-``rotation.x/z`` (ProcTHOR's floor objects stand upright), ``kinematic`` (every floor object is an obstacle), ``children[]`` (objects on other objects: not floor obstacles), ``openness``
+``rotation.x/z`` (ProcTHOR's floor objects stand upright), ``kinematic`` (every floor object is an obstacle), ``openness``
 (a door is always passable, as a pedestrian opens it), ``room0/room1`` (the hole's wall says where it is),
 lights, skybox and ``metadata``.
 
@@ -40,6 +43,7 @@ the ceiling; the USD proxy and the Gaussian scene are written with the package.
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import json
 import re
@@ -52,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from song.datasets.limits import limits
-from song.datasets.scenes.dressing import DressingHints, Opening, Window
+from song.datasets.scenes.dressing import DressingHints, Item, Opening, Window
 from song.datasets.scenes.materials import procthor_floor_material
 from song.datasets.scenes.model import OccupancySpec, Region, SceneObject, SemanticMap
 from song.datasets.scenes.package import write_scene_package
@@ -350,14 +354,18 @@ def convert_house(
     from shapely.geometry import Point, Polygon
 
     shapes = {rid: Polygon(rooms[k]) for k, rid in room_ids.items()}
+    items = []
     for obj in house.get("objects", []):
         asset = assets.get(obj.get("assetId", ""))
         pos = obj["position"]
+        items += [item for child in obj.get("children", []) or [] if (item := _item(child, assets))]
         if asset is None:
             unsized += float(pos.get("y", 0.0)) < 1.0  # floor-level objects we could not size
             continue
         box = asset["boundingBox"]
         if pos["y"] - box["y"] / 2 > FLOOR_OBJECT_MAX_BOTTOM_M or max(box["x"], box["z"]) < MIN_FOOTPRINT_M:
+            if item := _item(obj, assets):  # a small or hanging object: seen, not an obstacle
+                items.append(item)
             continue
         centre = np.array([pos["x"], pos["z"]])
         right, forward = unity_yaw_axes(obj.get("rotation", {}).get("y", 0.0))
@@ -392,7 +400,29 @@ def convert_house(
         regions=regions,
         objects=objects,
     )
-    return ConvertedHouse(smap, raster.cells, _hints(house, room_ids, wall), unsized)
+    hints = dataclasses.replace(_hints(house, room_ids, wall), items=tuple(items))
+    return ConvertedHouse(smap, raster.cells, hints, unsized)
+
+
+def _item(obj: dict, assets: dict[str, Any]) -> Item | None:
+    """A ProcTHOR object as a small item: its asset's box at its position (None when the asset is unknown)."""
+    asset = assets.get(obj.get("assetId", "")) if isinstance(obj, dict) else None
+    pos = obj.get("position") if isinstance(obj, dict) else None
+    if asset is None or not isinstance(pos, dict):
+        return None
+    box = asset["boundingBox"]
+    try:
+        x, y, z = float(pos["x"]), float(pos["y"]), float(pos["z"])
+        yaw_deg = float((obj.get("rotation") or {}).get("y", 0.0))
+        sx, sy, sz = float(box["x"]), float(box["y"]), float(box["z"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not all(np.isfinite([x, y, z, yaw_deg, sx, sy, sz])) or min(sx, sy, sz) <= 0:
+        return None
+    right, _ = unity_yaw_axes(yaw_deg)
+    yaw = round(float(np.arctan2(right[1], right[0])), 4)
+    return Item(_snake(asset["objectType"]).replace("_", " "), (round(x, 4), round(z, 4)), yaw,
+                (round(sx / 2, 4), round(sz / 2, 4)), round(y - sy / 2, 4), round(y + sy / 2, 4))  # fmt: skip
 
 
 def import_procthor(

@@ -124,6 +124,8 @@ def dressing_meshes(
 
     def labelled_part(part: Part) -> ProxyMesh:
         label = GROUP_LABELS.get(part.group) or categories.get(part.group)
+        if part.group.startswith("item:"):
+            label = part.group.split(":", 1)[1]
         return _labelled(part_mesh(part), part.material, label, convex=True)
 
     solids += [labelled_part(part) for part in dressing.parts if part.group != "door"]
