@@ -206,8 +206,8 @@ def sofa(oid: str, f: Frame, height: float, rng, arms: bool = True) -> list[Part
     fabric = _pick(rng, ("fabric_grey", "fabric_blue", "fabric_green", "fabric_beige", "fabric_red"))
     back = min(0.2, f.hy * 0.4)
     arm = min(0.15, f.hx * 0.2) if arms else 0.0
-    parts = [
-        _floor_box(f"{oid}/seat", oid, f, 0, back / 2, f.hx, f.hy - back / 2, min(0.44, height), fabric),
+    parts = [  # the seat stops at the arms: coplanar end faces would fight in a renderer
+        _floor_box(f"{oid}/seat", oid, f, 0, back / 2, f.hx - arm, f.hy - back / 2, min(0.44, height), fabric),
         _floor_box(f"{oid}/back", oid, f, 0, -f.hy + back / 2, f.hx, back / 2, height, fabric),
     ]
     if arm:

@@ -54,6 +54,7 @@ FRAME_M = 0.05  # a light's rectangle drawn inset by this frame
 MIDDLE_GREY = 0.18  # auto exposure: the median surface radiance maps to this
 DEPTH_M = 0.02  # texel cells' depth along their normal axis
 MINOR_SHARE = 0.01
+SHADOW_BLUR_PASSES = 2  # [1 2 1]² passes over the 10 cm texels: penumbrae of ~0.2–0.3 m, as ceiling panels cast
 LARGE_LIGHT_M2, MAX_SHADOW_RAYS = (
     0.2,
     8,
@@ -578,7 +579,8 @@ def _direct(fine: Texels, table: LightTable, tracer: Tracer) -> np.ndarray:
     num = sum_by(tex, w * ~blocked[:, None], k)
     den = sum_by(tex, w, k)
     ratio = np.where(den > 0, num / np.maximum(den, 1e-30), 1.0)
-    return (e @ table.colour) * ratio
+    # one ray per texel and light is noise in a penumbra: the shadowed share is blurred along the surface
+    return (e @ table.colour) * fine.blur(ratio, SHADOW_BLUR_PASSES)
 
 
 @nb.njit(cache=True, inline="always")

@@ -36,11 +36,12 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from song.datasets.scenes.model import VersionedFile
 from song.errors import SceneError
 from song.util import write_text_atomic
 
@@ -154,27 +155,16 @@ class Light(_Model):
         return self.power_w / (math.pi * max(self.area, 1e-12))
 
 
-class LightRig(_Model):
+class LightRig(VersionedFile):
     """Top level of ``lights.json``."""
+
+    format_name: ClassVar[str] = FORMAT_NAME
+    format_version: ClassVar[int] = FORMAT_VERSION
 
     format: str = FORMAT_NAME
     version: int = FORMAT_VERSION
     exposure_ev: float | None = None
     lights: list[Light] = Field(default=[], max_length=MAX_LIGHTS)
-
-    @field_validator("format")
-    @classmethod
-    def _format(cls, value: str) -> str:
-        if value != FORMAT_NAME:
-            raise ValueError(f"expected '{FORMAT_NAME}'")
-        return value
-
-    @field_validator("version")
-    @classmethod
-    def _version(cls, value: int) -> int:
-        if value != FORMAT_VERSION:
-            raise ValueError(f"unsupported version {value}; this release reads version {FORMAT_VERSION}")
-        return value
 
     @field_validator("exposure_ev")
     @classmethod

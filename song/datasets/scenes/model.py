@@ -7,7 +7,7 @@ or the other files live in :mod:`song.datasets.scenes.package`.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -41,6 +41,27 @@ def _check_point(point: Point2) -> Point2:
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+
+class VersionedFile(_Model):
+    """A JSON file's top level with ``format`` and ``version`` checked against the class's own."""
+
+    format_name: ClassVar[str]
+    format_version: ClassVar[int]
+
+    @field_validator("format", check_fields=False)
+    @classmethod
+    def _format(cls, value: str) -> str:
+        if value != cls.format_name:
+            raise ValueError(f"expected '{cls.format_name}'")
+        return value
+
+    @field_validator("version", check_fields=False)
+    @classmethod
+    def _version(cls, value: int) -> int:
+        if value != cls.format_version:
+            raise ValueError(f"unsupported version {value}; this release reads version {cls.format_version}")
+        return value
 
 
 class Frame(_Model):
@@ -145,8 +166,11 @@ class SceneObject(_Model):
         return value
 
 
-class SemanticMap(_Model):
+class SemanticMap(VersionedFile):
     """Top level of ``semantic_map.json``."""
+
+    format_name: ClassVar[str] = FORMAT_NAME
+    format_version: ClassVar[int] = FORMAT_VERSION
 
     format: str = FORMAT_NAME
     version: int = FORMAT_VERSION
@@ -162,20 +186,6 @@ class SemanticMap(_Model):
     occupancy: OccupancySpec
     regions: list[Region] = []
     objects: list[SceneObject] = []
-
-    @field_validator("format")
-    @classmethod
-    def _format(cls, value: str) -> str:
-        if value != FORMAT_NAME:
-            raise ValueError(f"expected '{FORMAT_NAME}'")
-        return value
-
-    @field_validator("version")
-    @classmethod
-    def _version(cls, value: int) -> int:
-        if value != FORMAT_VERSION:
-            raise ValueError(f"unsupported version {value}; this release reads version {FORMAT_VERSION}")
-        return value
 
     @field_validator("bounds")
     @classmethod

@@ -284,21 +284,20 @@ def _define_lights(stage, lights, used: set[str]) -> None:
 
 def read_usd_lighting(path: str | Path) -> str | None:
     """The baked probe grid's JSON from a proxy's layer metadata, or None (an unlit scene)."""
-    Sdf, Usd, UsdGeom, Vt = _pxr()
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    if layer is None:
-        raise FormatError(path, "", "not a readable USD layer")
-    value = dict(layer.customLayerData).get(LIGHTING_KEY)
-    return value if isinstance(value, str) else None
+    return _layer_text(path, LIGHTING_KEY)
 
 
 def read_usd_dressing(path: str | Path) -> str | None:
     """The ``song_dressing`` JSON text of a proxy's layer metadata, or None when it has none."""
+    return _layer_text(path, DRESSING_KEY)
+
+
+def _layer_text(path: str | Path, key: str) -> str | None:
     Sdf, Usd, UsdGeom, Vt = _pxr()
     layer = Sdf.Layer.FindOrOpen(str(path))
     if layer is None:
         raise FormatError(path, "", "not a readable USD layer")
-    value = dict(layer.customLayerData).get(DRESSING_KEY)
+    value = dict(layer.customLayerData).get(key)
     return str(value) if value is not None else None
 
 
