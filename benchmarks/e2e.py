@@ -55,7 +55,18 @@ def main() -> None:
     total = time.perf_counter()
     run(
         "generate",
-        ["scenes", "generate", "--count", str(args.scenes), "--seed", str(args.seed), "--out", str(scenes)]
+        [
+            "scenes",
+            "generate",
+            "--count",
+            str(args.scenes),
+            "--seed",
+            str(args.seed),
+            "--out",
+            str(scenes),
+            "--workers",
+            str(args.workers),
+        ]
         + ([] if args.splat else ["--no-splat"]),
         record,
     )

@@ -70,7 +70,10 @@ def _run_cycles(python: Path, job_dir: Path, job: dict, meshes: dict) -> list[np
     """Cycles' images of a job (reused when the same job was rendered into ``job_dir`` before)."""
     job_dir.mkdir(parents=True, exist_ok=True)
     (job_dir / "job_input.json").write_text(json.dumps(job))
-    text = json.dumps(job, sort_keys=True)
+    import hashlib
+
+    digest = hashlib.sha256(b"".join(np.ascontiguousarray(meshes[k]).tobytes() for k in sorted(meshes))).hexdigest()
+    text = json.dumps({**job, "meshes_sha256": digest}, sort_keys=True)
     views = [job_dir / f"view_{i}.npy" for i in range(len(job["views"]))]
     done = job_dir / "job.json"
     if done.is_file() and done.read_text() == text and all(v.is_file() for v in views):

@@ -123,11 +123,12 @@ def generate(
     seed: int = typer.Option(0, "--seed", help="generator seed (same seed → identical bytes)"),
     splat: bool = typer.Option(True, "--splat/--no-splat", help="also write the Gaussian scene (PLY)"),
     spacing: float | None = SpacingOption,
+    workers: int = typer.Option(1, "--workers", "-j", min=1, help="processes (same bytes whatever the count)"),
 ) -> None:
-    """Procedural venues (office, clinic, lobby, shop, restaurant, home, library) with all four files."""
+    """Procedural venues (office, clinic, lobby, shop, restaurant, home, library) with all five files."""
     from song.datasets.scenes.generate import generate_scenes
 
-    paths = generate_scenes(count, seed, out, splat=splat, spacing=_spacing(spacing))
+    paths = generate_scenes(count, seed, out, splat=splat, spacing=_spacing(spacing), workers=workers)
     console.print(f"wrote {len(paths)} scene packages to {out}")
 
 

@@ -384,9 +384,20 @@ def generate_scenes(
     venues: tuple[str, ...] = VENUE_ORDER,
     splat: bool = True,
     spacing: float = SPACING_M,
+    workers: int = 1,
 ) -> list[Path]:
-    """``count`` packages cycling through ``venues`` (ids ``<venue>_<k>``)."""
-    return [
-        generate_scene(f"{venues[k % len(venues)]}_{k:04d}", venues[k % len(venues)], seed, out_dir, splat, spacing)
+    """``count`` packages cycling through ``venues`` (ids ``<venue>_<k>``), on ``workers`` processes.
+
+    Each package depends only on its id, venue and the seed: the same bytes whatever the worker count.
+    """
+    from song.parallel import parallel_map
+
+    jobs = [
+        (f"{venues[k % len(venues)]}_{k:04d}", venues[k % len(venues)], seed, str(out_dir), splat, spacing)
         for k in range(count)
     ]
+    return sorted(parallel_map(_generate_job, jobs, workers))
+
+
+def _generate_job(job: tuple) -> Path:
+    return generate_scene(*job)

@@ -10,13 +10,14 @@ exposure, then the sRGB transfer). E has three parts:
   its visibility: one shadow ray per texel and light, towards a point on the light that changes
   from texel to texel (a rank-1 lattice), cast through Embree (``embreex``) against the scene's proxy
   mesh. Lights giving a texel under 1 % of its light cast no ray and take the others' shadowed
-  share. A surfel's value is interpolated trilinearly between the texels around it (soft ~10 cm
-  penumbrae);
+  share. The shadowed share is blurred along the surface (two passes of a 3 × 3 binomial filter over
+  its texels: one ray per light is noise in a penumbra), and a surfel's value is interpolated
+  trilinearly between the texels around it (penumbrae of ~0.2–0.3 m, as ceiling panels cast);
 - **indirect** (diffuse inter-reflection), per 30 cm texel: 32 cosine-distributed rays gather the
   radiance ``ρ E / π`` of the 10 cm texels they hit (a proxy face without surfels: the largest texel
   of the 30 cm one there). The rays are cast once and kept as a sparse matrix; bounces are products
-  with it, iterated until one adds under 0.5 % (indoor albedos of 0.3–0.8 need 6–12: three bounces
-  would leave about a tenth of the light out, ``benchmarks/lighting.py`` measures it), then blurred
+  with it, iterated until one adds under 0.5 % (indoors a median 6–20 % of a surface's light arrives
+  after the third bounce, ``benchmarks/lighting.py`` measures it), then blurred
   along each surface (two passes of a 3 × 3 binomial filter over its texels). The procedural
   ambient occlusion (contacts, inside corners, undersides), which the 30 cm texels cannot resolve,
   scales this indirect part.

@@ -9,13 +9,15 @@ spacing past the geometry), and near-opaque (opacity 0.993). Faces smaller than 
 spacing get proportionally finer samples. Hidden faces (box bottoms on the floor, the back of open
 shelves, walls facing other walls) are skipped.
 
-Colour = procedural material texture (:mod:`song.datasets.scenes.materials`) × baked shading: a soft
-directional light from above (0.72 ambient + 0.28·max(0, n·L)) and ambient occlusion -- floors darken
-within ~25 cm of walls and furniture, walls near the floor, the ceiling and inside corners, furniture
-toward the floor and under raised parts. Entrances get a closed door just outside them (a camera would
-otherwise look out into the void). Gaussians are written in spatial order (half-metre cells), so
-the SuperSplat chunks of 256 are compact and a renderer culls them well. Deterministic in the scene and
-the seed.
+Colour = procedural material texture (:mod:`song.datasets.scenes.materials`) lit by the scene's lights
+(:mod:`song.datasets.scenes.lights`, baked by :mod:`song.datasets.scenes.lighting`: shadows, diffuse
+bounces, exposure); unlit (``light=False``), a soft directional light from above (0.72 ambient +
+0.28·max(0, n·L)) times ambient occlusion -- floors darken within ~25 cm of walls and furniture, walls
+near the floor, the ceiling and inside corners, furniture toward the floor and under raised parts
+(lit scenes keep this occlusion on their bounced light). Entrances get a closed door just outside
+them (a camera would otherwise look out into the void). Gaussians are written in spatial order
+(half-metre cells), so the SuperSplat chunks of 256 are compact and a renderer culls them well.
+Deterministic in the scene and the seed.
 """
 
 from __future__ import annotations

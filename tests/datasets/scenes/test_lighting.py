@@ -197,3 +197,15 @@ def test_probe_grid_lights_avatars_where_the_scene_is_lit(make_scene) -> None:
     dress_package(root)
     dark = ProbeGrid.from_json(read_usd_lighting(root / USD_PROXY))
     assert np.all(dark.values == 0)
+
+
+def test_lit_generation_is_identical_whatever_the_worker_count(tmp_path: Path) -> None:
+    from song.datasets.scenes.generate import generate_scenes
+
+    trees = []
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}"
+        generate_scenes(2, seed=4, out_dir=out, spacing=0.1, workers=workers)
+        trees.append({p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()})
+    assert trees[0].keys() == trees[1].keys() and any(p.name == LIGHTS_FILE for p in trees[0])
+    assert trees[0] == trees[1]
