@@ -155,7 +155,7 @@ def scene_job(root: Path, views, size, samples: int, units: dict):
     from song.datasets.scenes.materials import material_of, srgb_to_linear
     from song.datasets.scenes.proxy import dressing_meshes
     from song.datasets.scenes.splat import proxy_triangles, synthesize_gaussians
-    from song.datasets.scenes.usd import box_mesh, read_usd_dressing
+    from song.datasets.scenes.usd import read_usd_dressing
     from song.render import render, robot_camera
     from song.render.gaussians import GaussianSet
 
@@ -181,9 +181,8 @@ def scene_job(root: Path, views, size, samples: int, units: dict):
         camera = robot_camera(x, y, yaw, CAMERA_HEIGHT, HFOV, *size)
         images.append(render(gaussians, camera, background=(0, 0, 0)).rgb.astype(np.float64) / 255.0)
     groups: dict[str, list] = {}
-    for k, m in enumerate([*solids, *surfaces]):
-        mesh = box_mesh(k, m) if not hasattr(m, "vertices") else m
-        groups.setdefault(m.material or "plaster_white", []).append(mesh)
+    for m in [*solids, *surfaces]:
+        groups.setdefault(m.material or "plaster_white", []).append(m)
     meshes, names, albedos = {}, [], []
     for k, (name, items) in enumerate(sorted(groups.items())):
         offsets = np.cumsum([0] + [len(m.vertices) for m in items])

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from song.datasets.scenes.furniture import Part
+from song.datasets.scenes.lights import segment_distance, wall_edges
 from song.util import derive_rng
 
 MAX_PER_TOP = 8
@@ -250,27 +251,20 @@ def wall_decor(dressing, openings, windows, seed: int) -> list[Part]:
     blocked_segments = [(np.asarray(o.a), np.asarray(o.b), 0.3 + o.thickness) for o in openings]
     blocked_segments += [(np.asarray(a), np.asarray(b), 0.3) for a, b in windows]
     out: list[Part] = []
-    for poly in dressing.walls:
-        for ring in (poly.exterior, *poly.interiors):
-            pts = np.asarray(ring.coords)
-            for a, b in zip(pts[:-1], pts[1:], strict=True):
-                length = float(np.linalg.norm(b - a))
-                if length < 1.4:
-                    continue
-                along = (b - a) / length
-                inward = np.array([along[1], -along[0]])
-                for k in range(max(1, int(length // WALL_DECOR_EVERY_M))):
-                    if rng.random() < 0.15:
-                        continue
-                    c = a + along * (k + 0.5) * length / max(1, int(length // WALL_DECOR_EVERY_M))
-                    probe = grid.to_cell((c + inward * 0.4)[None])[0]
-                    if not (0 <= probe[0] < grid.shape[0] and 0 <= probe[1] < grid.shape[1]):
-                        continue
-                    if free[probe[0], probe[1]] < 0.2:  # something stands before it
-                        continue
-                    if any(_segment_distance(c, s0, s1) < 0.8 + m for s0, s1, m in blocked_segments):
-                        continue
-                    out += _wall_piece(f"decor_{len(out)}", c, along, inward, dressing, art, sign, rng)
+    for a, length, along, inward in wall_edges(dressing, 1.4):
+        count = max(1, int(length // WALL_DECOR_EVERY_M))
+        for k in range(count):
+            if rng.random() < 0.15:
+                continue
+            c = a + along * (k + 0.5) * length / count
+            probe = grid.to_cell((c + inward * 0.4)[None])[0]
+            if not (0 <= probe[0] < grid.shape[0] and 0 <= probe[1] < grid.shape[1]):
+                continue
+            if free[probe[0], probe[1]] < 0.2:  # something stands before it
+                continue
+            if any(segment_distance(c, s0, s1) < 0.8 + m for s0, s1, m in blocked_segments):
+                continue
+            out += _wall_piece(f"decor_{len(out)}", c, along, inward, dressing, art, sign, rng)
     return out
 
 
@@ -297,9 +291,3 @@ def item_count(parts: list[Part]) -> int:
     """How many items (not parts: a potted plant's pot and leaves, a picture's canvas and frame count once)."""
     return len({p.name.split("/")[0] + "/" + p.name.split("/")[1] if p.name.count("/") >= 2 else p.name.split("/frame")[0]
                 for p in parts if p.group.startswith("item:")})  # fmt: skip
-
-
-def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    ab = b - a
-    t = float(np.clip((p - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0))
-    return float(np.linalg.norm(a + t * ab - p))

@@ -54,12 +54,8 @@ RAY_OFFSET_M = 0.02  # ray origins leave the surface along its normal by this mu
 FRAME_M = 0.05  # a light's rectangle drawn inset by this frame
 MIDDLE_GREY = 0.18  # auto exposure: the median surface radiance maps to this
 DEPTH_M = 0.02  # texel cells' depth along their normal axis
-MINOR_SHARE = 0.01
+MINOR_SHARE = 0.01  # lights under this share of a texel's unshadowed light cast no shadow ray from it
 SHADOW_BLUR_PASSES = 2  # [1 2 1]² passes over the 10 cm texels: penumbrae of ~0.2–0.3 m, as ceiling panels cast
-LARGE_LIGHT_M2, MAX_SHADOW_RAYS = (
-    0.2,
-    8,
-)  # a rect light casts one shadow ray per this area from each texel, ≤ 8  # lights under this share of a texel's unshadowed light cast no shadow ray from it
 NEAR_FIELD = 6.0  # a rect light is integrated exactly within this many half-sizes (a point source beyond: < 1 % off)
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 _AXES = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, 1.0], [0, 0, -1.0]])
@@ -266,22 +262,23 @@ class Texels:
         """Group points (surfels, or finer texels with their ``weight``) into texels of ``h`` m on the grid ``lo``, ``dims``."""
         keys = cell_keys(pos, bucket, h, lo, dims)
         uniq, index = np.unique(keys, return_inverse=True)
-        w = np.ones(len(pos)) if weight is None else np.asarray(weight, dtype=np.float64)
-        count = np.bincount(index, weights=w, minlength=len(uniq))
-        mean = lambda v: np.column_stack(  # noqa: E731
-            [np.bincount(index, weights=v[:, c] * w, minlength=len(uniq)) / np.maximum(count, 1e-12) for c in range(3)]
-        )
-        return cls(h, lo, dims, uniq, index, mean(pos), _unit(mean(normals)), count)
+        w = np.ones((len(pos), 1)) if weight is None else np.asarray(weight, dtype=np.float64)[:, None]
+        count = sum_by(index, w, len(uniq))[:, 0]
+        total = sum_by(index, np.hstack([pos, normals]) * w, len(uniq)) / np.maximum(count, 1e-12)[:, None]
+        return cls(h, lo, dims, uniq, index, total[:, :3], _unit(total[:, 3:]), count)
+
+    def cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 3) integer cells and (K,) buckets of the texels (the inverse of :func:`cell_keys`)."""
+        flat, bucket = self.keys // 6, self.keys % 6
+        d1, d2 = self.dims[1], self.dims[2]
+        return np.column_stack([flat // (d1 * d2), (flat // d2) % d1, flat % d2]), bucket
 
     def centres(self) -> np.ndarray:
         """(K, 3) where the interpolation places each texel's value.
 
         Its cell's centre across its normal axis, its surfels' mean along it (on a flat texel's surface).
         """
-        bucket = self.keys % 6
-        flat = self.keys // 6
-        cell = np.column_stack([flat // (self.dims[1] * self.dims[2]), (flat // self.dims[2]) % self.dims[1],
-                                flat % self.dims[2]])  # fmt: skip
+        cell, bucket = self.cells()
         out = self.lo + (cell + 0.5) * self.h
         axis = bucket // 2
         rows = np.arange(len(out))
@@ -293,10 +290,7 @@ class Texels:
 
         A [1 2 1]² filter over its in-plane neighbours that exist (same bucket and depth cell).
         """
-        bucket = self.keys % 6
-        flat = self.keys // 6
-        d1, d2 = self.dims[1], self.dims[2]
-        cell = np.column_stack([flat // (d1 * d2), (flat // d2) % d1, flat % d2])
+        cell, bucket = self.cells()
         axis = bucket // 2
         a1, a2 = (axis + 1) % 3, (axis + 2) % 3
         rows = np.arange(len(cell))
@@ -306,7 +300,7 @@ class Texels:
                 c = cell.copy()
                 c[rows, a1] += o1
                 c[rows, a2] += o2
-                key = ((c[:, 0] * d1 + c[:, 1]) * d2 + c[:, 2]) * 6 + bucket
+                key = _encode(c, bucket, self.dims)
                 k = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
                 found = self.keys[k] == key
                 neighbours.append(np.where(found, k, rows))
@@ -343,17 +337,17 @@ def cell_keys(pos: np.ndarray, bucket: np.ndarray, h: float, lo: np.ndarray, dim
     axis = bucket // 2
     step = np.full((len(pos), 3), h)
     step[np.arange(len(pos)), axis] = DEPTH_M
-    cell = np.clip(np.floor((pos - lo) / step).astype(np.int64), 0, dims - 1)
+    return _encode(np.clip(np.floor((pos - lo) / step).astype(np.int64), 0, dims - 1), bucket, dims)
+
+
+def _encode(cell: np.ndarray, bucket: np.ndarray, dims: np.ndarray) -> np.ndarray:
     return ((cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]) * 6 + bucket
 
 
 def mean_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
     """Means of ``values`` rows grouped by ``index`` (0..k−1)."""
     values = values.reshape(len(values), -1)
-    count = np.maximum(np.bincount(index, minlength=k), 1)
-    return np.column_stack(
-        [np.bincount(index, weights=values[:, c], minlength=k) / count for c in range(values.shape[1])]
-    )
+    return sum_by(index, values, k) / np.maximum(np.bincount(index, minlength=k), 1)[:, None]
 
 
 def sum_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
@@ -538,9 +532,8 @@ def bake(
     # emitters are counted as lights, not as reflectors
     fine_albedo = fine.mean(np.where(emissive[:, None], 0.0, albedo))
     coarse = Texels.of(fine.pos, fine.normal, fine_bucket, COARSE_M, lo, dims, fine.count)
-    parent = coarse.index
     # the gather's noise (32 rays a texel) blurred along the surfaces: indirect light varies slowly
-    indirect_coarse = coarse.blur(_gather(coarse, fine, fine_direct, fine_albedo, parent, tracer))
+    indirect_coarse = coarse.blur(_gather(coarse, fine, fine_direct, fine_albedo, tracer))
     fine_indirect = coarse.interpolate(fine.pos, fine_bucket, indirect_coarse)
     both = fine.interpolate(pos, bucket, np.hstack([fine_direct, fine_indirect]))
     direct, indirect = both[:, :3], both[:, 3:] * ao[:, None]
@@ -639,7 +632,7 @@ def _shadow_rays(origin, e, minor, kind, centre, u, v, half, radius):
     return tex, light, dirs, dist
 
 
-def _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer) -> np.ndarray:
+def _gather(coarse, fine, fine_direct, fine_albedo, tracer) -> np.ndarray:
     """(C, 3) indirect irradiance at the coarse texels after :data:`BOUNCES` bounces."""
     k = len(coarse.keys)
     dirs_local = _hemisphere(GATHER_RAYS)
@@ -654,7 +647,7 @@ def _gather(coarse, fine, fine_direct, fine_albedo, parent, tracer) -> np.ndarra
     origin = np.repeat(coarse.pos + coarse.normal * RAY_OFFSET_M, GATHER_RAYS, axis=0)
     hit_fine = _hit_texels(origin, dirs, fine, coarse, tracer)
     owner = np.repeat(np.arange(k), GATHER_RAYS)
-    return _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, np.zeros((k, 3)), GATHER_RAYS)
+    return _iterate(owner, hit_fine, k, fine_direct, fine_albedo, coarse.index, GATHER_RAYS)
 
 
 def _hit_texels(origin, dirs, fine: Texels, coarse: Texels, tracer: Tracer) -> np.ndarray:
@@ -679,7 +672,7 @@ def _hit_texels(origin, dirs, fine: Texels, coarse: Texels, tracer: Tracer) -> n
     return np.where(hit, found, -1)
 
 
-def _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, start, rays_per) -> np.ndarray:
+def _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, rays_per) -> np.ndarray:
     """Bounce iterations of the gather: E_ind = mean over rays of ρ_hit (E_direct,hit + E_ind,parent(hit)).
 
     The rays are a sparse (coarse texel × fine texel) matrix, so a bounce is one product; iterated
@@ -691,7 +684,7 @@ def _iterate(owner, hit_fine, k, fine_direct, fine_albedo, parent, start, rays_p
     gather = csr_matrix(
         (np.full(int(valid.sum()), 1.0 / rays_per), (owner[valid], hit_fine[valid])), shape=(k, len(fine_direct))
     )
-    indirect = start
+    indirect = np.zeros((k, 3))
     for _ in range(BOUNCES):
         radiance = fine_albedo * (fine_direct + indirect[parent])
         new = gather @ radiance

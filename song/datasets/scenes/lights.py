@@ -277,12 +277,9 @@ def _lamps(smap) -> list[Light]:
 
 def _face_distance(dressing, mid: np.ndarray, inward: np.ndarray, limit: float = 0.6) -> float | None:
     """How far from ``mid`` along ``inward`` the floor starts (the wall's room-side face), m; None if not within ``limit``."""
-    grid = dressing.grid
-    step = grid.resolution / 4
+    step = dressing.grid.resolution / 4
     for k in range(int(limit / step) + 1):
-        p = mid + inward * k * step
-        rc = grid.to_cell(p[None])[0]
-        if 0 <= rc[0] < grid.shape[0] and 0 <= rc[1] < grid.shape[1] and dressing.floor_mask[rc[0], rc[1]]:
+        if _on_floor(dressing, mid + inward * k * step):
             return k * step
     return None
 
@@ -336,43 +333,50 @@ def rule_windows(dressing, openings) -> list[Light]:
     if top - WINDOW_SILL_M < 0.5:
         return []
     out = []
+    for a, length, along, inward in wall_edges(dressing, WINDOW_WIDTH_M + 0.4):
+        mid = a + along * length / 2
+        if _on_floor(dressing, mid - inward * 0.6):
+            continue  # floor behind: an interior wall
+        if not _on_floor(dressing, mid + inward * (0.5 * grid.resolution + 0.01)):
+            continue
+        count = max(1, int(length // WINDOW_EVERY_M))
+        width = min(WINDOW_WIDTH_M, length - 0.4)
+        for i in range(count):
+            c = a + along * (i + 0.5) * length / count
+            if any(segment_distance(c, o.a, o.b) < width / 2 + 0.3 + o.thickness for o in openings):
+                continue
+            out.append(_window_light(f"window_{len(out)}", c + inward * 0.01, along, inward, width, WINDOW_SILL_M, top))
+    return out
+
+
+def wall_edges(dressing, min_length: float):
+    """``(start, length, unit direction, unit normal into the room)`` of every wall-polygon edge ≥ ``min_length`` m.
+
+    The rings run with the wall on their left, so the room lies on each edge's right.
+    """
     for poly in dressing.walls:
         for ring in (poly.exterior, *poly.interiors):
             pts = np.asarray(ring.coords)
             for a, b in zip(pts[:-1], pts[1:], strict=True):
                 length = float(np.linalg.norm(b - a))
-                if length < WINDOW_WIDTH_M + 0.4:
-                    continue
-                along = (b - a) / length
-                inward = np.array([along[1], -along[0]])  # the room is on the ring's right
-                mid = (a + b) / 2
-                behind = mid - inward * 0.6
-                rc = grid.to_cell(behind[None])[0]
-                inside = 0 <= rc[0] < grid.shape[0] and 0 <= rc[1] < grid.shape[1]
-                if inside and dressing.floor_mask[rc[0], rc[1]]:
-                    continue  # floor behind: an interior wall
-                front = grid.to_cell((mid + inward * (0.5 * grid.resolution + 0.01))[None])[0]
-                if not (0 <= front[0] < grid.shape[0] and 0 <= front[1] < grid.shape[1]):
-                    continue
-                if not dressing.floor_mask[front[0], front[1]]:
-                    continue
-                count = max(1, int(length // WINDOW_EVERY_M))
-                width = min(WINDOW_WIDTH_M, length - 0.4)
-                for i in range(count):
-                    c = a + along * (i + 0.5) * length / count
-                    if any(_near_opening(c, o, width / 2 + 0.3) for o in openings):
-                        continue
-                    out.append(
-                        _window_light(f"window_{len(out)}", c + inward * 0.01, along, inward, width, WINDOW_SILL_M, top)
-                    )
-    return out
+                if length >= min_length:
+                    along = (b - a) / length
+                    yield a, length, along, np.array([along[1], -along[0]])
 
 
-def _near_opening(point: np.ndarray, opening, margin: float) -> bool:
-    a, b = np.asarray(opening.a), np.asarray(opening.b)
+def _on_floor(dressing, point: np.ndarray) -> bool:
+    """Whether ``point`` (2,) falls on a floor cell of the dressing's grid."""
+    grid = dressing.grid
+    r, c = grid.to_cell(np.asarray(point)[None])[0]
+    return bool(0 <= r < grid.shape[0] and 0 <= c < grid.shape[1] and dressing.floor_mask[r, c])
+
+
+def segment_distance(p, a, b) -> float:
+    """Distance from point ``p`` to the segment ``a``–``b`` (2-D, m)."""
+    p, a, b = (np.asarray(v, dtype=np.float64) for v in (p, a, b))
     ab = b - a
-    t = np.clip((point - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
-    return float(np.linalg.norm(a + t * ab - point)) < margin + opening.thickness
+    t = float(np.clip((p - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0))
+    return float(np.linalg.norm(a + t * ab - p))
 
 
 def place_lights(dressing, smap, hints) -> LightRig:

@@ -433,9 +433,7 @@ def _check_splat_count(root: Path, package, spacing: float) -> None:
 
 def proxy_triangles(solids, surfaces) -> np.ndarray:
     """(T, 3, 3) triangles of the proxy meshes (the baker's occluders)."""
-    from song.datasets.scenes.usd import ProxyBox, box_mesh
-
-    meshes = [box_mesh(i, m) if isinstance(m, ProxyBox) else m for i, m in enumerate([*solids, *surfaces])]
+    meshes = [*solids, *surfaces]
     if not meshes:
         return np.zeros((0, 3, 3))
     return np.concatenate([np.asarray(m.vertices, dtype=np.float64)[np.asarray(m.faces)] for m in meshes])
