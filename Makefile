@@ -9,7 +9,7 @@ BENCH ?= runs/demo-bench
 SAMPLES ?= datasets/sample_scenes
 SCENES ?= runs/scenes
 
-.PHONY: setup demo test api lint format bench clean
+.PHONY: setup demo test test-lerobot lerobot-env api lint format bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -60,6 +60,24 @@ test: setup
 	$(VENV)/bin/ruff format --check song tests benchmarks
 	$(MAKE) api
 	$(VENV)/bin/pytest -q -m "not slow"
+
+# LeRobot's own loader reads `song collect`'s datasets (tests/runtime/test_lerobot.py): lerobot 0.4.4 from
+# PyPI in its own environment, with the torch, torchvision and torchcodec it pins (never a dependency of song);
+# FFmpeg's libraries for torchcodec from Debian when we are root (without them only the pyav reader is tested)
+LEROBOT_ENV := build/bench-envs/lerobot
+$(LEROBOT_ENV)/.installed-stamp:
+	$(PYTHON) -m venv $(LEROBOT_ENV)
+	$(LEROBOT_ENV)/bin/pip install --quiet torch==2.9.1 torchvision==0.24.1 'torchcodec==0.8.*' lerobot==0.4.4
+	command -v ffmpeg >/dev/null || { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && \
+		(apt-get install -y -q ffmpeg >/dev/null 2>&1 || \
+		 (apt-get update -q >/dev/null 2>&1 && apt-get install -y -q ffmpeg >/dev/null 2>&1)); } || \
+		echo "ffmpeg not installed: the torchcodec reader will be skipped"
+	touch $@
+
+lerobot-env: $(LEROBOT_ENV)/.installed-stamp
+
+test-lerobot: setup lerobot-env
+	SONG_LEROBOT_PYTHON=$(LEROBOT_ENV)/bin/python $(VENV)/bin/pytest -q tests/runtime/test_lerobot.py
 
 # the API reference, generated from the docstrings (a warning, e.g. a module that fails to import, fails it)
 api: setup

@@ -144,8 +144,11 @@ def collect_command(
     no_avatars: bool = typer.Option(
         False, "--no-avatars", help="the avatar-free ablation: episodes without pedestrians (recorded in the dataset)"
     ),
+    dataset_format: str = typer.Option(
+        "v3.0", "--format", help="LeRobot codebase version: v3.0 (LeRobot's current release) or v2.1 (older stacks)"
+    ),
 ) -> None:
-    """Roll a policy out on training episodes; write what imitation learning needs (LeRobot dataset layout)."""
+    """Roll a policy out on training episodes; write what imitation learning needs (a LeRobot dataset)."""
     from song.runtime.collect import collect
 
     width, height = parse_size(resolution, "--resolution")
@@ -162,6 +165,7 @@ def collect_command(
         resolve_workers(workers),
         allow_modified=allow_modified,
         no_avatars=no_avatars,
+        dataset_format=dataset_format,
     )
     console.print(
         f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "

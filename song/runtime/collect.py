@@ -1,22 +1,16 @@
 """``song collect``: roll a policy out on a release's episodes and write an imitation-learning dataset.
 
-The paper fine-tunes NavDP on trajectories replayed from training episodes; this writes such rollouts in
-the LeRobot dataset layout (codebase v2.1), so LeRobot's loaders and tools read them as they are:
-
-    DS/meta/info.json            features (dtype, shape, names), fps, counts, path templates, splits
-    DS/meta/episodes.jsonl       one line per episode: index, tasks, length, and SONG's episode id, outcome
-    DS/meta/episodes_stats.jsonl per-episode min / max / mean / std / count of every numeric feature
-    DS/meta/tasks.jsonl          the one task ("navigate to the goal among pedestrians")
-    DS/data/chunk-000/episode_000000.parquet   one row per control step
-    DS/videos/chunk-000/observation.images.rgb/episode_000000.mp4   image streams (H.264)
+The paper fine-tunes NavDP on trajectories replayed from training episodes; this writes such rollouts as
+a LeRobot dataset (:mod:`song.runtime.lerobot`: codebase v3.0, what LeRobot's current release reads, or
+v2.1 for older stacks), so LeRobot's loaders and tools read them as they are.
 
 Per step: the chosen sensors' observations *before* the action, as features derived from each
 sensor's declared space (:func:`plan_features`; any registered sensor can be recorded): a vector
 space becomes ``observation.<sensor>`` (float32, flattened; a dict of vectors is concatenated in its
 order, e.g. ``state`` → pose x, y, yaw, last command v, ω, goal in the robot frame x, y, goal distance
-and bearing, time, named from the space); a float camera image becomes ``observation.<sensor>``
-(float16, flattened row-major, its height, width and unit in the feature's ``info``); a colour image
-becomes a video ``observation.images.<sensor>``. Then the action ``[v, ω]`` as executed (clipped to the robot's
+and bearing, time, named from the space); a depth image becomes ``observation.<sensor>`` (uint16
+millimetres, (height, width), 0 = no depth: the RealSense convention); a colour image becomes a
+video ``observation.images.<sensor>``. Then the action ``[v, ω]`` as executed (clipped to the robot's
 limits), the reward terms of the Gymnasium env (progress toward the goal, ±10 at success / collision)
 and their sum, and the done flags. By default only successful rollouts are written (``keep="success"``,
 what behaviour cloning wants); ``keep="all"`` writes every one (``next.success`` tells them apart).
@@ -27,15 +21,12 @@ Atomic per dataset: everything is written under ``DS/.partial/`` and moved into 
 next collect into the same folder removes. One collect at a time writes a folder (a lock).
 
 Deterministic: the same release, policy and options give byte-identical files whatever the worker
-count (x264 runs single-threaded). Checked against the layout as LeRobot documents it (the ``lerobot``
-package itself pulls a large dependency tree that is not installed here).
+count (x264 runs single-threaded).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,18 +40,13 @@ from song.runtime.ablation import without_avatars
 from song.runtime.avatars import make_collider
 from song.runtime.env import reward_terms
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
+from song.runtime.lerobot import FORMATS, PARTIAL_DIR, write_dataset
 from song.runtime.loop import EpisodeRunner, run_episode
 from song.runtime.policies import load_policy, policy_sensors
 from song.runtime.sensors import Box, SensorSuite, parse_sensor_names
-from song.util import folder_lock, write_json_atomic, write_text_atomic
+from song.util import folder_lock
 
-CODEBASE_VERSION = "v2.1"
-CHUNK_SIZE = 1000
 LOCK_FILE = ".song.lock"  # held while a collect writes the dataset folder
-PARTIAL_DIR = ".partial"  # the dataset is written here and moved into place when whole
-TASK = "navigate to the goal among pedestrians"
-DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
-VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
 
 
 @dataclass
@@ -81,7 +67,7 @@ class FeaturePlan:
     key: str
     sensor: str
     entries: tuple[str, ...]  # the dict entries concatenated, () for a plain Box
-    kind: str  # "vector" (float32), "depth" (float16 image) or "video" (uint8 colour image)
+    kind: str  # "vector" (float32), "depth" (uint16 mm image) or "video" (uint8 colour image)
     spec: dict[str, Any]
 
     def extract(self, observation: dict[str, Any]) -> np.ndarray:
@@ -93,7 +79,16 @@ class FeaturePlan:
             value = np.concatenate([np.asarray(value[e], np.float64).ravel() for e in self.entries])
         if self.kind == "video":
             return np.asarray(value, np.uint8)
-        return np.asarray(value, np.float16 if self.kind == "depth" else np.float32).ravel()
+        if self.kind == "depth":
+            return depth_to_mm(value)
+        return np.asarray(value, np.float32).ravel()
+
+
+def depth_to_mm(depth_m: np.ndarray) -> np.ndarray:
+    """Depth in metres → uint16 millimetres, 0 where there is no depth (not finite, ≤ 0 or beyond 65.5 m)."""
+    depth = np.asarray(depth_m, np.float64)
+    valid = np.isfinite(depth) & (depth > 0) & (depth < 65.535)
+    return np.where(valid, np.rint(np.where(valid, depth, 0.0) * 1000.0), 0).astype(np.uint16)
 
 
 def _leaf_names(key: str, box: Box) -> list[str]:
@@ -110,19 +105,23 @@ def _leaf_names(key: str, box: Box) -> list[str]:
 def _plan(sensor: str, key: str, box: Box, fps: float) -> FeaturePlan:
     if box.image and np.dtype(box.dtype) == np.uint8:
         h, w = box.shape[:2]
-        spec = {"dtype": "video", "shape": [h - h % 2, w - w % 2, 3], "names": ["height", "width", "channels"],
-                "info": {"video.fps": fps, "video.codec": "h264", "video.pix_fmt": "yuv420p", "has_audio": False}}  # fmt: skip
+        h, w = h - h % 2, w - w % 2  # the codec's even size
+        info = {
+            "video.height": h,
+            "video.width": w,
+            "video.codec": "h264",
+            "video.pix_fmt": "yuv420p",
+            "video.is_depth_map": False,
+            "video.fps": fps,
+            "video.channels": 3,
+            "has_audio": False,
+        }
+        spec = {"dtype": "video", "shape": [h, w, 3], "names": ["height", "width", "channels"], "info": info}
         return FeaturePlan(f"observation.images.{key}", sensor, (), "video", spec)
     if box.image:
         h, w = box.shape[:2]
-        info = {"height": h, "width": w, **({"unit": box.unit} if box.unit else {})}
-        return FeaturePlan(
-            f"observation.{key}",
-            sensor,
-            (),
-            "depth",
-            {"dtype": "float16", "shape": [h * w], "names": None, "info": info},
-        )
+        spec = {"dtype": "uint16", "shape": [h, w], "names": ["height", "width"], "info": {"unit": "mm", "no_depth": 0}}
+        return FeaturePlan(f"observation.{key}", sensor, (), "depth", spec)
     names = list(box.names) if box.names else None
     spec = {"dtype": "float32", "shape": [int(np.prod(box.shape))], "names": names}
     return FeaturePlan(f"observation.{key}", sensor, (), "vector", spec)
@@ -147,19 +146,6 @@ def plan_features(suite: SensorSuite, chosen: tuple[str, ...], fps: float) -> li
             for key, box in space.items():
                 plans.append(dataclasses.replace(_plan(name, f"{name}.{key}", box, fps), entries=(key,)))
     return plans
-
-
-def _features(plans: list[FeaturePlan]) -> dict[str, dict]:
-    """LeRobot feature declarations: the sensors' (from their spaces), then the action, rewards and indices."""
-    out: dict[str, dict] = {plan.key: plan.spec for plan in plans}
-    out["action"] = {"dtype": "float32", "shape": [2], "names": ["v", "omega"]}
-    for name in ("next.reward", "reward.progress", "reward.terminal", "timestamp"):
-        out[name] = {"dtype": "float32", "shape": [1], "names": None}
-    for name in ("next.done", "next.success"):
-        out[name] = {"dtype": "bool", "shape": [1], "names": None}
-    for name in ("frame_index", "episode_index", "index", "task_index"):
-        out[name] = {"dtype": "int64", "shape": [1], "names": None}
-    return out
 
 
 @dataclass(frozen=True)
@@ -211,7 +197,7 @@ def record_rollout(
     """Run ``policy`` on ``episode`` with :func:`run_episode`, recording every step; (record, result).
 
     Per step: the observation before acting, the executed action and the reward terms (the Gymnasium
-    env's, :func:`song.runtime.env.reward_terms`). The record is what :func:`write_dataset` writes.
+    env's, :func:`song.runtime.env.reward_terms`). The record is what :func:`song.runtime.lerobot.write_dataset` writes.
     """
     recorder = _Recorder(policy)
     names = tuple(dict.fromkeys([*policy_sensors(policy), *sensors]))
@@ -243,51 +229,6 @@ def record_rollout(
     return out, result
 
 
-def _table(episode: dict[str, Any], episode_index: int, first_index: int, fps: float):
-    import pyarrow as pa
-
-    n = episode["steps"]
-    success = episode["outcome"] == "success"
-    cols: dict[str, Any] = {}
-    for plan in episode["plans"]:
-        if plan.kind != "video":
-            values = episode[plan.key]
-            cols[plan.key] = pa.FixedSizeListArray.from_arrays(pa.array(values.ravel()), values.shape[1])
-    cols["action"] = pa.FixedSizeListArray.from_arrays(pa.array(episode["action"].ravel()), 2)
-    progress = np.asarray(episode["progress"], np.float32)
-    terminal = np.asarray(episode["terminal"], np.float32)
-    cols["next.reward"] = progress + terminal
-    cols["reward.progress"] = progress
-    cols["reward.terminal"] = terminal
-    done = np.zeros(n, bool)
-    done[-1] = True
-    cols["next.done"] = done
-    cols["next.success"] = done & success
-    cols["timestamp"] = (np.arange(n) / fps).astype(np.float32)
-    cols["frame_index"] = np.arange(n, dtype=np.int64)
-    cols["episode_index"] = np.full(n, episode_index, np.int64)
-    cols["index"] = first_index + np.arange(n, dtype=np.int64)
-    cols["task_index"] = np.zeros(n, np.int64)
-    return pa.table(cols)
-
-
-def _stats(table) -> dict[str, dict]:
-    """LeRobot's per-episode statistics of every numeric column (per dimension for vectors)."""
-    out = {}
-    for name in table.column_names:
-        values = np.asarray(table.column(name).to_pylist(), dtype=np.float64)
-        if values.ndim == 1:
-            values = values[:, None]
-        out[name] = {
-            "min": values.min(axis=0).tolist(),
-            "max": values.max(axis=0).tolist(),
-            "mean": values.mean(axis=0).tolist(),
-            "std": values.std(axis=0).tolist(),
-            "count": [int(len(values))],
-        }
-    return out
-
-
 def collect(
     bench_path: str | Path,
     policy_name: str,
@@ -301,6 +242,7 @@ def collect(
     step_timeout_s: float = DEFAULT_STEP_TIMEOUT_S,
     allow_modified: bool = False,
     no_avatars: bool = False,
+    dataset_format: str = "v3.0",
 ) -> CollectSummary:
     """Roll ``policy_name`` out on the ``split`` episodes of a release into a LeRobot dataset at ``out``.
 
@@ -318,15 +260,18 @@ def collect(
         step_timeout_s: a policy call taking longer fails its episode.
         allow_modified: collect from a release that fails its integrity check (recorded in ``info.json``).
         no_avatars: the avatar-free ablation: episodes without pedestrians (recorded in ``info.json``).
+        dataset_format: LeRobot codebase version to write, ``v3.0`` (LeRobot's current release) or ``v2.1``.
 
     Raises:
-        SongError: an unknown sensor or ``keep``, an existing non-empty ``out``, or an unknown split.
+        SongError: an unknown sensor, ``keep`` or format, an existing non-empty ``out``, or an unknown split.
     """
     from song.parallel import parallel_map
 
     chosen = parse_sensor_names(sensors)  # any registered sensor: its space says how it is stored
     if keep not in ("success", "all"):
         raise SongError(f"collect: --keep {keep!r}: use success or all")
+    if dataset_format not in FORMATS:
+        raise SongError(f"collect: --format {dataset_format!r}: use one of {', '.join(FORMATS)}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise SongError(f"{out}: a file; collect writes a dataset folder (choose another --out)")
@@ -356,83 +301,11 @@ def collect(
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
                  "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
                  "release_check": bench.integrity or "ok", "ablation": "no_avatars" if no_avatars else None}  # fmt: skip
-        frames = write_dataset(out, kept, fps, split, about)
+        frames = write_dataset(out, kept, fps, split, about, dataset_format)
         return CollectSummary(out, len(kept), frames, successes, len(rollouts))
-
-
-def write_dataset(out: Path, kept: list[dict[str, Any]], fps: float, split: str, about: dict[str, Any]) -> int:
-    """Write recorded rollouts as a LeRobot dataset in ``out`` (built in ``out/.partial``, then moved in).
-
-    The caller holds ``out``'s lock. Returns the number of frames written.
-    """
-    partial = out / PARTIAL_DIR
-    written = _write_episodes(partial, kept, fps)
-    _write_meta(partial, kept, written, fps, split, about)
-    for name in ("data", "videos", "meta"):  # the dataset appears complete, meta (its index) last
-        if (partial / name).exists():
-            os.replace(partial / name, out / name)
-    partial.rmdir()
-    return written["frames"]
 
 
 def refuse_non_empty(out: Path, writer: str = "collect") -> None:
     """Refuse an ``out`` holding anything but the lock and what a killed writer left."""
     if out.is_dir() and any(p.name not in (LOCK_FILE, PARTIAL_DIR) for p in out.iterdir()):
         raise SongError(f"{out}: not empty; {writer} writes a new dataset (choose another --out)")
-
-
-def _write_episodes(out: Path, kept: list[dict[str, Any]], fps: float) -> dict[str, Any]:
-    """Each kept rollout's Parquet table and videos; ``{"frames", "videos", "stats"}`` of what was written."""
-    import pyarrow.parquet as pq
-
-    frames, videos, stats = 0, 0, []
-    for index, result in enumerate(kept):
-        chunk = index // CHUNK_SIZE
-        table = _table(result, index, frames, fps)
-        path = out / DATA_PATH.format(episode_chunk=chunk, episode_index=index)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        pq.write_table(table, path, compression="zstd")
-        for plan in (p for p in result["plans"] if p.kind == "video"):
-            from song.render.video import write_mp4
-
-            video = out / VIDEO_PATH.format(episode_chunk=chunk, video_key=plan.key, episode_index=index)
-            video.parent.mkdir(parents=True, exist_ok=True)
-            write_mp4(video, result[plan.key], fps)
-            videos += 1
-        stats.append({"episode_index": index, "stats": _stats(table)})
-        frames += result["steps"]
-    return {"frames": frames, "videos": videos, "stats": stats}
-
-
-def _write_meta(
-    out: Path, kept: list[dict[str, Any]], written: dict[str, Any], fps: float, split: str, about: dict
-) -> None:
-    """LeRobot's ``meta/``: info.json (features from the first kept rollout), episodes, their stats, tasks."""
-    lines = [
-        {"episode_index": index, "tasks": [TASK], "length": r["steps"], "song_episode_id": r["episode_id"],
-         "outcome": r["outcome"], "difficulty": r["difficulty"]}
-        for index, r in enumerate(kept)
-    ]  # fmt: skip
-    info = {
-        "codebase_version": CODEBASE_VERSION,
-        "robot_type": "song_differential_drive",
-        "total_episodes": len(lines),
-        "total_frames": written["frames"],
-        "total_tasks": 1,
-        "total_videos": written["videos"],
-        "total_chunks": max(1, (len(lines) - 1) // CHUNK_SIZE + 1),
-        "chunks_size": CHUNK_SIZE,
-        "fps": fps,
-        "splits": {split: f"0:{len(lines)}"},
-        "data_path": DATA_PATH,
-        "video_path": VIDEO_PATH if written["videos"] else None,
-        "features": _features(kept[0]["plans"]) if kept else {},
-        "song": about,
-    }
-    meta = out / "meta"
-    meta.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(meta / "info.json", info)
-    write_text_atomic(meta / "episodes.jsonl", "".join(json.dumps(x, sort_keys=True) + "\n" for x in lines))
-    stats = "".join(json.dumps(x, sort_keys=True) + "\n" for x in written["stats"])
-    write_text_atomic(meta / "episodes_stats.jsonl", stats)
-    write_text_atomic(meta / "tasks.jsonl", json.dumps({"task_index": 0, "task": TASK}) + "\n")

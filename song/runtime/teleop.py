@@ -254,8 +254,9 @@ def run_teleop(
         The results summary (as ``song eval`` writes it).
     """
     from song.datasets.bench import open_benchmark
-    from song.runtime.collect import LOCK_FILE, record_rollout, refuse_non_empty, write_dataset
+    from song.runtime.collect import LOCK_FILE, record_rollout, refuse_non_empty
     from song.runtime.evaluate import EvalSetup, write_results
+    from song.runtime.lerobot import write_dataset
     from song.util import folder_lock
 
     bench = open_benchmark(bench_path)

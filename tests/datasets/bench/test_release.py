@@ -280,8 +280,8 @@ def test_collect_small_round_trip(graded_run, tmp_path: Path) -> None:
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     info = json.loads((out / "meta" / "info.json").read_text())
-    (e,) = [json.loads(line) for line in (out / "meta" / "episodes.jsonl").read_text().splitlines()]
-    data = pq.read_table(out / info["data_path"].format(episode_chunk=0, episode_index=0))
+    (e,) = pq.read_table(out / "meta" / "episodes" / "chunk-000" / "file-000.parquet").to_pylist()
+    data = pq.read_table(out / info["data_path"].format(chunk_index=0, file_index=0))
     assert data.num_rows == e["length"] == info["total_frames"]
     episode = bench.open(release).episode(e["song_episode_id"])
     runner = EpisodeRunner(episode, make_collider(episode))
@@ -317,42 +317,39 @@ def test_collect_writes_a_lerobot_dataset_from_the_training_split(graded_run, tm
     assert _files(outs[0]) == _files(outs[1])  # deterministic, whatever the worker count
     out = outs[0]
     info = json.loads((out / "meta" / "info.json").read_text())
-    assert info["codebase_version"] == "v2.1" and info["total_episodes"] == 3 and info["splits"] == {"train": "0:3"}
+    assert info["codebase_version"] == "v3.0" and info["total_episodes"] == 3 and info["splits"] == {"train": "0:3"}
     features = info["features"]
     assert features["observation.state"]["shape"] == [10] and features["action"]["names"] == ["v", "omega"]
-    assert features["observation.images.rgb"]["dtype"] == "video" and features["observation.depth"]["shape"] == [
-        64 * 48
-    ]
-    episodes = [json.loads(line) for line in (out / "meta" / "episodes.jsonl").read_text().splitlines()]
+    assert features["observation.images.rgb"]["dtype"] == "video" and features["observation.depth"]["shape"] == [48, 64]
+    episodes = pq.read_table(out / "meta" / "episodes" / "chunk-000" / "file-000.parquet").to_pylist()
+    data = pq.read_table(out / info["data_path"].format(chunk_index=0, file_index=0))
     bench_release = bench.open(release)
     frames = 0
     for e in episodes:
-        data = pq.read_table(out / info["data_path"].format(episode_chunk=0, episode_index=e["episode_index"]))
-        assert data.num_rows == e["length"] and data.column("next.done").to_pylist()[-1] is True
-        assert data.column("index").to_pylist()[0] == frames  # the global frame index runs across episodes
-        rewards = np.array(data.column("next.reward").to_pylist())
-        parts = np.array(data.column("reward.progress").to_pylist()) + np.array(
-            data.column("reward.terminal").to_pylist()
+        rows = data.slice(e["dataset_from_index"], e["length"])
+        assert rows.column("next.done").to_pylist()[-1] is True
+        assert rows.column("index").to_pylist()[0] == frames  # the global frame index runs across episodes
+        rewards = np.array(rows.column("next.reward").to_pylist())
+        parts = np.array(rows.column("reward.progress").to_pylist()) + np.array(
+            rows.column("reward.terminal").to_pylist()
         )
         np.testing.assert_allclose(rewards, parts, atol=1e-6)
         episode = bench_release.episode(e["song_episode_id"])
         runner = EpisodeRunner(episode, make_collider(episode))
-        states = np.array(data.column("observation.state").to_pylist())
-        for state, action in zip(states, data.column("action").to_pylist(), strict=True):
+        states = np.array(rows.column("observation.state").to_pylist())
+        for state, action in zip(states, rows.column("action").to_pylist(), strict=True):
             np.testing.assert_allclose([runner.pose.x, runner.pose.y], state[:2], atol=1e-5)
             runner.step(*action)
         assert runner.outcome == e["outcome"]
-        video = out / info["video_path"].format(
-            episode_chunk=0, video_key="observation.images.rgb", episode_index=e["episode_index"]
-        )
-        with av.open(str(video)) as container:
-            assert sum(1 for _ in container.decode(video=0)) == e["length"]
-        frames += data.num_rows
+        frames += e["length"]
+    video = out / info["video_path"].format(video_key="observation.images.rgb", chunk_index=0, file_index=0)
+    with av.open(str(video)) as container:
+        assert sum(1 for _ in container.decode(video=0)) == frames  # the episodes share one video
     assert info["total_frames"] == frames
     success = tmp_path / "dataset_success"
     result = CliRunner().invoke(app, ["collect", "--bench", str(release), "--out", str(success), "--limit", "3"])
     assert result.exit_code == 0, result.output
-    kept = [json.loads(line) for line in (success / "meta" / "episodes.jsonl").read_text().splitlines()]
+    kept = pq.read_table(success / "meta" / "episodes" / "chunk-000" / "file-000.parquet").to_pylist()
     assert [k["song_episode_id"] for k in kept] == [e["song_episode_id"] for e in episodes if e["outcome"] == "success"]
     again = CliRunner().invoke(app, ["collect", "--bench", str(release), "--out", str(out)])
     assert again.exit_code != 0 and "not empty" in again.output
