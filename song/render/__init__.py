@@ -6,7 +6,7 @@ use it.
 
 from song.render.camera import Camera, focal_from_hfov, look_at, robot_camera, robot_cameras
 from song.render.gaussians import GaussianSet, concat
-from song.render.render import RenderOutput, render, render_batch, resolve_backend
+from song.render.render import RenderOutput, render, render_batch, render_views, resolve_backend
 
 __all__ = [
     "Camera",
@@ -17,6 +17,7 @@ __all__ = [
     "look_at",
     "render",
     "render_batch",
+    "render_views",
     "resolve_backend",
     "robot_camera",
     "robot_cameras",

@@ -104,11 +104,12 @@ def _sh_colour(sh, i, c, degree, x, y, z):
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
 def project_kernel(means, quats, scales, opacities, log_alpha, sh, degree, sel, rot, trans, campos,
-                   fx, fy, cx, cy, width, height, near, far, eps2d, offset, attr, depth, rect, valid):  # fmt: skip
+                   fx, fy, cx, cy, width, height, near, far, eps2d, offset, row0, attr, depth, rect, valid):  # fmt: skip
     """Project Gaussians ``sel`` of one set into rows ``offset + k`` of ``attr`` (N, N_ATTR), ``depth``, ``rect``.
 
     ``log_alpha`` is ln(255·opacity) per Gaussian (:meth:`GaussianSet.log_alpha_range`, computed once per
-    set): the σ beyond which α < 1/255.
+    set): the σ beyond which α < 1/255. ``row0`` is added to the tile rows of ``rect``: camera b of a batch
+    owns tile rows b·tiles_y … (b + 1)·tiles_y − 1, so one binning serves every camera.
     """
     tiles_x = (width + TILE - 1) // TILE
     tiles_y = (height + TILE - 1) // TILE
@@ -201,8 +202,8 @@ def project_kernel(means, quats, scales, opacities, log_alpha, sh, degree, sel, 
         # tiles holding a pixel centre within the box: columns u − rx − ½ … u + rx − ½ (a superset)
         rect[o, 0] = min(max(0, int(math.floor((u - rx - 0.5) / TILE))), tiles_x)
         rect[o, 1] = min(max(0, int(math.floor((u + rx - 0.5) / TILE)) + 1), tiles_x)
-        rect[o, 2] = min(max(0, int(math.floor((v - ry - 0.5) / TILE))), tiles_y)
-        rect[o, 3] = min(max(0, int(math.floor((v + ry - 0.5) / TILE)) + 1), tiles_y)
+        rect[o, 2] = min(max(0, int(math.floor((v - ry - 0.5) / TILE))), tiles_y) + row0
+        rect[o, 3] = min(max(0, int(math.floor((v + ry - 0.5) / TILE)) + 1), tiles_y) + row0
         valid[o] = rect[o, 1] > rect[o, 0] and rect[o, 3] > rect[o, 2]
 
 
@@ -278,8 +279,11 @@ def bin_kernel(order, rect, tiles_x, tiles_y, n_parts):
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
-def composite_kernel(offsets, ids, attr, width, height, tiles_x, background, out_rgb, out_depth, out_alpha):
-    """Front-to-back compositing of every pixel (see module doc); outputs float32 (H, W, 3), (H, W), (H, W).
+def composite_kernel(offsets, ids, attr, width, height, tiles_x, tiles_y, background, out_rgb, out_depth, out_alpha):
+    """Front-to-back compositing of every pixel (see module doc); outputs float32 (B, H, W, 3), (B, H, W), (B, H, W).
+
+    Tile ``t`` is tile ``t mod (tiles_x·tiles_y)`` of camera ``t div (tiles_x·tiles_y)``: the cameras of a
+    batch are composited in one parallel loop, each pixel exactly as if its camera were rendered alone.
 
     Within a tile the loop runs Gaussian by Gaussian over the pixels of its box that are not finished
     (outside the box α < 1/255, so such pixels would skip it anyway): each pixel sees the same Gaussians
@@ -288,9 +292,11 @@ def composite_kernel(offsets, ids, attr, width, height, tiles_x, background, out
     test; α < 1/255 is tested as σ > ln(255·o) first, which spares the exponential for the tails.
     """
     n_tiles = offsets.shape[0] - 1
+    per_camera = tiles_x * tiles_y
     for t in prange(n_tiles):
-        x0 = (t % tiles_x) * TILE
-        y0 = (t // tiles_x) * TILE
+        cam, local = t // per_camera, t % per_camera
+        x0 = (local % tiles_x) * TILE
+        y0 = (local // tiles_x) * TILE
         nx = min(TILE, width - x0)
         ny = min(TILE, height - y0)
         trans = np.ones(TILE * TILE)
@@ -355,8 +361,8 @@ def composite_kernel(offsets, ids, attr, width, height, tiles_x, background, out
                 p = i * TILE + j
                 tr = trans[p]
                 al = 1.0 - tr
-                out_rgb[y0 + i, x0 + j, 0] = acc[p, 0] + tr * background[0]
-                out_rgb[y0 + i, x0 + j, 1] = acc[p, 1] + tr * background[1]
-                out_rgb[y0 + i, x0 + j, 2] = acc[p, 2] + tr * background[2]
-                out_alpha[y0 + i, x0 + j] = al
-                out_depth[y0 + i, x0 + j] = acc[p, 3] / al if al > 0.0 else 0.0
+                out_rgb[cam, y0 + i, x0 + j, 0] = acc[p, 0] + tr * background[0]
+                out_rgb[cam, y0 + i, x0 + j, 1] = acc[p, 1] + tr * background[1]
+                out_rgb[cam, y0 + i, x0 + j, 2] = acc[p, 2] + tr * background[2]
+                out_alpha[cam, y0 + i, x0 + j] = al
+                out_depth[cam, y0 + i, x0 + j] = acc[p, 3] / al if al > 0.0 else 0.0

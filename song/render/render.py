@@ -70,6 +70,18 @@ def visible_chunks(gaussians: GaussianSet, camera: Camera) -> np.ndarray:
 def _render_numba(
     sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray, profile: dict[str, float] | None = None
 ) -> RenderOutput:
+    return _render_numba_views([(sets, camera)], background, profile)[0]
+
+
+def _render_numba_views(
+    views: Sequence[tuple[Sequence[GaussianSet], Camera]],
+    background: np.ndarray,
+    profile: dict[str, float] | None = None,
+) -> list[RenderOutput]:
+    """Several views (each its Gaussian sets and camera; one size), each image equal to that view alone.
+
+    One projection buffer, one binning and one parallel compositing loop over every camera's tiles.
+    """
     clock = [time.perf_counter()]
 
     def lap(name: str) -> None:
@@ -78,41 +90,49 @@ def _render_numba(
             profile[name] = profile.get(name, 0.0) + now - clock[0]
             clock[0] = now
 
-    selections = [(s, visible_chunks(s, camera)) for s in sets if len(s)]
+    camera0 = views[0][1]
+    width, height = int(camera0.width), int(camera0.height)
+    tiles_x = (width + kernel.TILE - 1) // kernel.TILE
+    tiles_y = (height + kernel.TILE - 1) // kernel.TILE
+    selections = [[(s, visible_chunks(s, camera)) for s in sets if len(s)] for sets, camera in views]
     lap("cull")
-    total = sum(len(sel) for _, sel in selections)
+    total = sum(len(sel) for view in selections for _, sel in view)
     attr = np.empty((total, kernel.N_ATTR), dtype=np.float32)  # half the memory traffic of float64
     depth = np.empty(total)
     rect = np.empty((total, 4), dtype=np.int64)
     valid = np.zeros(total, dtype=np.bool_)
-    rot = np.ascontiguousarray(camera.rotation, dtype=np.float64)
-    trans = np.ascontiguousarray(camera.translation, dtype=np.float64)
-    pos = np.ascontiguousarray(camera.position, dtype=np.float64)
-    offset = 0
-    for s, sel in selections:
-        if len(sel):
-            kernel.project_kernel(
-                s.means, s.quats, s.scales, s.opacities, s.log_alpha_range(), s.sh, s.sh_degree, sel, rot, trans, pos,
-                float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy),
-                int(camera.width), int(camera.height), float(camera.near), float(camera.far), EPS2D, offset,
-                attr, depth, rect, valid,
-            )  # fmt: skip
-        offset += len(sel)
+    offset, bounds = 0, [0]
+    for b, ((_, camera), view) in enumerate(zip(views, selections, strict=True)):
+        rot = np.ascontiguousarray(camera.rotation, dtype=np.float64)
+        trans = np.ascontiguousarray(camera.translation, dtype=np.float64)
+        pos = np.ascontiguousarray(camera.position, dtype=np.float64)
+        for s, sel in view:
+            if len(sel):
+                kernel.project_kernel(
+                    s.means, s.quats, s.scales, s.opacities, s.log_alpha_range(), s.sh, s.sh_degree, sel, rot, trans,
+                    pos, float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy), width, height,
+                    float(camera.near), float(camera.far), EPS2D, offset, b * tiles_y, attr, depth, rect, valid,
+                )  # fmt: skip
+            offset += len(sel)
+        bounds.append(offset)
     lap("project")
-    order = kernel.depth_order(np.flatnonzero(valid), depth)  # one global depth sort; ties by input order
-    lap("sort")
-    tiles_x = (camera.width + kernel.TILE - 1) // kernel.TILE
-    tiles_y = (camera.height + kernel.TILE - 1) // kernel.TILE
-    offsets, ids = kernel.bin_kernel(order, rect, tiles_x, tiles_y, BIN_PARTS)
-    lap("bin")
-    out_rgb = np.empty((camera.height, camera.width, 3), dtype=np.float32)
-    out_depth = np.empty((camera.height, camera.width), dtype=np.float32)
-    out_alpha = np.empty((camera.height, camera.width), dtype=np.float32)
-    kernel.composite_kernel(
-        offsets, ids, attr, int(camera.width), int(camera.height), tiles_x, background, out_rgb, out_depth, out_alpha
+    # each camera's visible Gaussians by depth (ties by input order), the cameras one after another
+    order = np.concatenate(
+        [
+            kernel.depth_order(lo + np.flatnonzero(valid[lo:hi]), depth)
+            for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
+        ]
     )
+    lap("sort")
+    offsets, ids = kernel.bin_kernel(order, rect, tiles_x, tiles_y * len(views), BIN_PARTS)
+    lap("bin")
+    out_rgb = np.empty((len(views), height, width, 3), dtype=np.float32)
+    out_depth = np.empty((len(views), height, width), dtype=np.float32)
+    out_alpha = np.empty((len(views), height, width), dtype=np.float32)
+    kernel.composite_kernel(offsets, ids, attr, width, height, tiles_x, tiles_y, background, out_rgb, out_depth,
+                            out_alpha)  # fmt: skip
     lap("composite")
-    return RenderOutput(to_uint8(out_rgb), out_depth, out_alpha, out_rgb)
+    return [RenderOutput(to_uint8(out_rgb[b]), out_depth[b], out_alpha[b], out_rgb[b]) for b in range(len(views))]
 
 
 def _render_reference(sets: Sequence[GaussianSet], camera: Camera, background: np.ndarray) -> RenderOutput:
@@ -205,6 +225,33 @@ def render(
     return plugins.lookup("render_backend", name)(sets, camera, bg, profile)
 
 
+def render_views(
+    views: Sequence[tuple[GaussianSet | Sequence[GaussianSet], Camera]],
+    backend: str = "auto",
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    profile: dict[str, float] | None = None,
+) -> list[RenderOutput]:
+    """Several views, each its own Gaussian sets and camera (the robots of a vector env, in their scenes).
+
+    The numba backend renders them in one pass: one projection buffer, one binning and one parallel
+    compositing loop over the tiles of every camera, so small images keep both cores busy and the
+    per-call overhead is paid once. Other backends render one view after another. Each output equals
+    :func:`render` of that view alone, pixel for pixel.
+
+    Raises:
+        ValueError: cameras of different sizes or clip planes.
+    """
+    views = [([g] if isinstance(g, GaussianSet) else list(g), camera) for g, camera in views]
+    if len({(c.width, c.height, c.near, c.far) for _, c in views}) > 1:
+        raise ValueError("render_views: every camera must have the same size and clip planes")
+    if not views:
+        return []
+    if resolve_backend(backend) == "numba":
+        bg = np.asarray(background, dtype=np.float64).reshape(3)
+        return _render_numba_views(views, bg, profile)
+    return [render(sets, camera, backend, background, profile) for sets, camera in views]
+
+
 def render_batch(
     gaussians: GaussianSet | Sequence[GaussianSet],
     cameras: Sequence[Camera],
@@ -213,8 +260,8 @@ def render_batch(
 ) -> list[RenderOutput]:
     """The same Gaussians seen by several cameras of one size (the views of a vector env's robots).
 
-    gsplat renders them in one call (its batched ``viewmats``); the CPU backends render one view after
-    another. Each output equals :func:`render` of that camera alone.
+    gsplat renders them in one call (its batched ``viewmats``); numba in one pass (:func:`render_views`).
+    Each output equals :func:`render` of that camera alone.
 
     Raises:
         ValueError: cameras of different sizes or clip planes.
@@ -235,4 +282,4 @@ def render_batch(
                 raise
             _gsplat_failed(exc)
             backend = "numba"
-    return [render(sets, camera, backend, background) for camera in cameras]
+    return render_views([(sets, camera) for camera in cameras], backend, background)

@@ -7,7 +7,8 @@ a dict with one entry per selected sensor (:mod:`song.runtime.sensors`), and the
 from the release. The env id carries the benchmark format's major version: ``song/SongNav-v1``; it is
 registered when this module is imported, so ``gym.make("song.runtime.env:song/SongNav-v1", bench=...)``
 works on its own. :func:`make` adds the release's step limit as ``max_episode_steps``;
-:func:`make_vector` makes a Gymnasium vector env of several copies.
+:func:`make_vector` makes a Gymnasium vector env of several copies (a process each);
+:class:`SongVectorEnv` steps several in one process and renders their cameras in one call.
 """
 
 from __future__ import annotations
@@ -129,6 +130,10 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (``options["episode_id"]``, or one drawn with ``self.np_random``)."""
+        self._start(seed, options)
+        return self.runner.observation(), self._info()
+
+    def _start(self, seed: int | None, options: dict[str, Any] | None) -> None:
         super().reset(seed=seed)
         episode_id = (options or {}).get("episode_id")
         if episode_id is None:
@@ -137,7 +142,6 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         if self.no_avatars:
             episode = without_avatars(episode)
         self.runner = EpisodeRunner(episode, make_collider(episode), self.sensors)
-        return self.runner.observation(), self._info()
 
     def step(self, action):
         """Apply [v, ω]; reward = progress toward the goal, ±10 at a success / collision end.
@@ -145,21 +149,29 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         An action that is not two finite numbers ends the episode as ``error`` (terminated, the reason
         in ``info["error"]``), the rule ``song eval`` applies to a policy's malformed command.
         """
+        reward, terminated, truncated, info = self._advance(action)
+        return self.runner.observation(), reward, terminated, truncated, info
+
+    def _advance(self, action) -> tuple[float, bool, bool, dict[str, Any]]:
         if self.runner is None:
             raise RuntimeError("call reset() before step()")
         try:
             v, w = as_command(action)
         except PolicyFailure as exc:
             self.runner.fail(str(exc))
-            return self.runner.observation(), 0.0, True, False, {**self._info(), "error": self.runner.error}
+            return 0.0, True, False, {**self._info(), "error": self.runner.error}
         previous = np.linalg.norm(self.runner.pose.xy - self.runner.episode.goal_xy)
         outcome = self.runner.step(v, w)
         distance = np.linalg.norm(self.runner.pose.xy - self.runner.episode.goal_xy)
         progress, terminal = reward_terms(float(previous), float(distance), outcome)
-        reward = progress + terminal
         terminated = outcome in ("success", "obstacle", "human")
-        truncated = outcome == "timeout"
-        return self.runner.observation(), reward, terminated, truncated, self._info()
+        return progress + terminal, terminated, outcome == "timeout", self._info()
+
+    def _prerender_jobs(self) -> list[tuple]:
+        """This env's camera views at the current step, for :func:`song.runtime.vision.render_together`."""
+        view = self.runner.view()
+        command = (float(view.command[0]), float(view.command[1]))
+        return [(sv, view.pose, view.t, w, h, command) for sv, w, h in self.sensors.camera_views()]
 
 
 def reward_terms(previous_m: float, distance_m: float, outcome: str | None) -> tuple[float, float]:
@@ -208,6 +220,76 @@ def make_vector(bench: str, num_envs: int, asynchronous: bool = True, **kwargs: 
         )
     factories = [partial(make, bench, **kwargs) for _ in range(num_envs)]
     return gym.vector.SyncVectorEnv(factories)
+
+
+class SongVectorEnv(gym.vector.VectorEnv if gym is not None else object):  # type: ignore[misc]
+    """``num_envs`` envs in this process, stepped together, their cameras rendered in one call per step.
+
+    A Gymnasium ``VectorEnv`` (autoreset ``NEXT_STEP``, as Gymnasium's own vector envs: the step after an
+    episode ends returns the next episode's first observation, with reward 0). Every step renders the
+    camera views of all envs through :func:`song.render.render_views` (numba: one projection buffer and
+    one parallel loop over every camera's tiles), and each observation equals what that env alone would
+    return. Env ``i`` is seeded with ``seed + i``. The envs share one cache of loaded scenes.
+    """
+
+    metadata = {"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP if gym else None, "render_modes": []}
+
+    def __init__(self, bench: str, num_envs: int, **kwargs: Any) -> None:
+        _require_gym()
+        from gymnasium.vector.utils import batch_space
+
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be ≥ 1 (got {num_envs})")
+        self.envs = [SongNavEnv(bench, **kwargs) for _ in range(num_envs)]
+        for env in self.envs[1:]:
+            for (view, _, _), (first, _, _) in zip(
+                env.sensors.camera_views(), self.envs[0].sensors.camera_views(), strict=True
+            ):
+                view.share_scenes(first)
+        self.num_envs = num_envs
+        self.single_observation_space = self.envs[0].observation_space
+        self.single_action_space = self.envs[0].action_space
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self._ended = np.zeros(num_envs, dtype=bool)
+
+    def _observe(self) -> Any:
+        from gymnasium.vector.utils import concatenate, create_empty_array
+
+        from song.runtime.vision import render_together
+
+        render_together([job for env in self.envs for job in env._prerender_jobs()])
+        observations = [env.runner.observation() for env in self.envs]
+        out = create_empty_array(self.single_observation_space, self.num_envs)
+        return concatenate(self.single_observation_space, observations, out)
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Start an episode in every env (``seed + i`` for env ``i`` when ``seed`` is an int)."""
+        seeds = (
+            [None if seed is None else seed + i for i in range(self.num_envs)] if not isinstance(seed, list) else seed
+        )
+        infos: dict[str, Any] = {}
+        for i, env in enumerate(self.envs):
+            env._start(seeds[i], options)
+            infos = self._add_info(infos, env._info(), i)
+        self._ended[:] = False
+        return self._observe(), infos
+
+    def step(self, actions):
+        """Step every env with its row of ``actions``; an env whose episode ended last step starts a new one."""
+        rewards = np.zeros(self.num_envs)
+        terminations = np.zeros(self.num_envs, dtype=bool)
+        truncations = np.zeros(self.num_envs, dtype=bool)
+        infos: dict[str, Any] = {}
+        for i, env in enumerate(self.envs):
+            if self._ended[i]:
+                env._start(None, None)
+                info = env._info()
+            else:
+                rewards[i], terminations[i], truncations[i], info = env._advance(actions[i])
+            infos = self._add_info(infos, info, i)
+        self._ended = terminations | truncations
+        return self._observe(), rewards, terminations, truncations, infos
 
 
 if gym is not None:  # so gym.make("song.runtime.env:song/SongNav-v1", ...) works with nothing else imported

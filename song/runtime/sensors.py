@@ -478,6 +478,12 @@ class SensorSuite:
         """The observation space: one entry per sensor."""
         return {name: sensor.space() for name, sensor in self.sensors.items()}
 
+    def camera_views(self) -> list[tuple[SceneView, int, int]]:
+        """The distinct (scene view, width, height) its camera sensors render (one per size)."""
+        out = {(id(s.scene_view), s.width, s.height): (s.scene_view, s.width, s.height)
+               for s in self.sensors.values() if isinstance(s, CameraSensor)}  # fmt: skip
+        return list(out.values())
+
     def reset(self, episode: Episode) -> None:
         """Reset every sensor for ``episode``."""
         for sensor in self.sensors.values():

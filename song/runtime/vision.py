@@ -33,7 +33,7 @@ from song.datasets.scenes.materials import linear_to_srgb, srgb_to_linear
 from song.datasets.scenes.ply import read_gaussian_ply
 from song.errors import BenchmarkError
 from song.geometry.rotations import wrap_angle
-from song.render import GaussianSet, RenderOutput, render, robot_camera
+from song.render import Camera, GaussianSet, RenderOutput, render, render_views, robot_camera
 from song.render.gaussians import SH_C0
 from song.runtime.avatars import body_proxy_points
 from song.runtime.robot import Pose
@@ -176,6 +176,10 @@ class SceneView:
         self._avatars: dict[int, _Avatar] = {}
         self._last: tuple[tuple, RenderOutput] | None = None
 
+    def share_scenes(self, other: SceneView) -> None:
+        """Use ``other``'s cache of loaded scenes and probes (envs of one process hold each scene once)."""
+        self._scenes, self._probes = other._scenes, other._probes
+
     def reset(self, episode: Episode) -> None:
         """Load (or reuse) the episode's scene Gaussians; forget the previous episode's avatars."""
         key = episode.gaussians_path
@@ -243,6 +247,30 @@ class SceneView:
             sets.append(GaussianSet(means, quats, avatar.scales, avatar.opacities, sh))
         return sets
 
+    def request(
+        self, pose: Pose, t: float, width: int, height: int, command: tuple[float, float] = (0.0, 0.0)
+    ) -> tuple[tuple, list[GaussianSet], Camera] | None:
+        """What :meth:`render` would draw for this view, as ``(key, sets, camera)``; None when it is cached."""
+        command = (float(command[0]), float(command[1]))
+        key = (pose.x, pose.y, pose.yaw, t, width, height, command)
+        if self._last is not None and self._last[0] == key:
+            return None
+        cam_cfg = self._episode.params.camera
+        camera = robot_camera(
+            pose.x, pose.y, pose.yaw, cam_cfg.height_m, cam_cfg.hfov_deg, width, height, cam_cfg.near_m, cam_cfg.far_m
+        )
+        people = self.posed_avatars(self.visible_pedestrians(pose, t, cam_cfg.far_m, cam_cfg.hfov_deg), t)
+        return key, [self._scenes[self._episode.gaussians_path], *people], camera
+
+    def accept(self, key: tuple, frame: RenderOutput) -> RenderOutput:
+        """The rendered ``frame`` of :meth:`request`'s view through the camera model; cached for ``key``."""
+        if self._model is None:
+            self._model = plugins.lookup("camera_model", self.camera_model)(self._episode.params)
+        pose = Pose(key[0], key[1], key[2])
+        out = self._model.apply(frame, CameraContext(int(self._episode.seed), float(key[3]), pose, key[6]))
+        self._last = (key, out)
+        return out
+
     def render(
         self, pose: Pose, t: float, width: int, height: int, command: tuple[float, float] = (0.0, 0.0)
     ) -> RenderOutput:
@@ -250,18 +278,26 @@ class SceneView:
 
         ``command`` is the robot's last (v, ω): a camera model may blur by the motion it causes.
         """
-        command = (float(command[0]), float(command[1]))
-        key = (pose.x, pose.y, pose.yaw, t, width, height, command)
-        if self._last is not None and self._last[0] == key:
+        job = self.request(pose, t, width, height, command)
+        if job is None:
             return self._last[1]
-        cam_cfg = self._episode.params.camera
-        camera = robot_camera(
-            pose.x, pose.y, pose.yaw, cam_cfg.height_m, cam_cfg.hfov_deg, width, height, cam_cfg.near_m, cam_cfg.far_m
-        )
-        people = self.posed_avatars(self.visible_pedestrians(pose, t, cam_cfg.far_m, cam_cfg.hfov_deg), t)
-        out = render([self._scenes[self._episode.gaussians_path], *people], camera, self.backend)
-        if self._model is None:
-            self._model = plugins.lookup("camera_model", self.camera_model)(self._episode.params)
-        out = self._model.apply(out, CameraContext(int(self._episode.seed), float(t), pose, command))
-        self._last = (key, out)
-        return out
+        key, sets, camera = job
+        return self.accept(key, render(sets, camera, self.backend))
+
+
+def render_together(views: list[tuple[SceneView, Pose, float, int, int, tuple[float, float]]]) -> None:
+    """Render the views of several :class:`SceneView` (the envs of a vector env) together.
+
+    One renderer call per backend and size (:func:`song.render.render_views`); each scene view then
+    answers :meth:`SceneView.render` for its view from its cache, with the frame it would have rendered
+    alone.
+    """
+    groups: dict[tuple, list[tuple[SceneView, tuple, list[GaussianSet], Camera]]] = {}
+    for scene_view, pose, t, width, height, command in views:
+        job = scene_view.request(pose, t, width, height, command)
+        if job is not None:
+            groups.setdefault((scene_view.backend, width, height), []).append((scene_view, *job))
+    for (backend, _, _), jobs in groups.items():
+        frames = render_views([(sets, camera) for _, _, sets, camera in jobs], backend)
+        for (scene_view, key, _, _), frame in zip(jobs, frames, strict=True):
+            scene_view.accept(key, frame)

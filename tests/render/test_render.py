@@ -186,6 +186,29 @@ def test_same_pixels_whatever_the_thread_count() -> None:
     assert one.rgb.tobytes() == many.rgb.tobytes() and one.depth.tobytes() == many.depth.tobytes()
 
 
+@pytest.mark.parametrize("size", [(120, 90), (64, 48)])  # 90 and 48 rows: a partial last tile row, and none
+def test_views_rendered_together_equal_each_rendered_alone(size: tuple[int, int]) -> None:
+    """One pass over several cameras (each its own scene and extra sets) gives each camera's image bit for bit."""
+    from song.render import render_batch, render_views
+
+    room, _ = _box_room(0.05)
+    views = [
+        ([room, _random_scene(1)], robot_camera(1.0, 1.5, 0.3, 0.8, 70.0, *size)),
+        (_random_scene(2, 400, 2), robot_camera(0.0, 0.0, 0.1, 0.8, 70.0, *size)),
+        ([room], robot_camera(3.2, 2.4, -2.5, 0.8, 70.0, *size)),
+        ([_random_scene(3, 50, 0), room, _random_scene(4)], robot_camera(2.0, 1.0, 1.9, 0.8, 70.0, *size)),
+    ]
+    together = render_views(views, "numba", background=(0.2, 0.3, 0.4))
+    for (sets, cam), got in zip(views, together, strict=True):
+        alone = render(sets, cam, "numba", background=(0.2, 0.3, 0.4))
+        for name in ("rgb", "depth", "alpha", "rgb_float"):
+            assert getattr(got, name).tobytes() == getattr(alone, name).tobytes(), name
+    shared = render_batch(room, [cam for _, cam in views], "numba")
+    assert all(a.rgb.tobytes() == render(room, cam, "numba").rgb.tobytes() for a, (_, cam) in zip(shared, views))
+    with pytest.raises(ValueError, match="same size"):
+        render_views([(room, views[0][1]), (room, robot_camera(0, 0, 0, 0.8, 70.0, 32, 24))], "numba")
+
+
 SPLATS = SHARED / "sample_scenes" / "playcanvas_splat"
 
 

@@ -190,3 +190,36 @@ def test_a_vector_env_of_spawned_copies() -> None:
         assert reward.shape == (2,) and obs["state"]["pose"].shape == (2, 3)
     finally:
         vector.close()
+
+
+def test_the_batched_vector_env_equals_its_envs_stepped_alone() -> None:
+    """Cameras rendered together give each env the observation it gets alone, through episode ends."""
+    pytest.importorskip("gymnasium")
+    from song.runtime.env import SongNavEnv, SongVectorEnv
+
+    kwargs = {"sensors": ("state", "rgbd"), "resolution": (40, 30)}
+    vector = SongVectorEnv(str(GOLDEN), 3, **kwargs)
+    alone = [SongNavEnv(str(GOLDEN), **kwargs) for _ in range(3)]
+    assert vector.observation_space["rgbd"]["rgb"].shape == (3, 30, 40, 3)
+    obs, info = vector.reset(seed=7)
+    singles = [env.reset(seed=7 + i) for i, env in enumerate(alone)]
+    assert list(info["episode_id"]) == [i["episode_id"] for _, i in singles]
+    rng = np.random.default_rng(0)
+    ended, resets = [False] * 3, 0
+    for _ in range(60):
+        actions = np.column_stack([rng.uniform(0.2, 1.0, 3), rng.uniform(-0.5, 0.5, 3)]).astype(np.float32)
+        obs, reward, terminated, truncated, _ = vector.step(actions)
+        for i, env in enumerate(alone):
+            if ended[i]:  # next-step autoreset: the env starts its next episode, reward 0
+                o, r = env.reset()[0], 0.0
+                resets += 1
+                ended[i] = False
+            else:
+                o, r, term, trunc, _ = env.step(actions[i])
+                ended[i] = term or trunc
+                assert (terminated[i], truncated[i]) == (term, trunc)
+            assert reward[i] == r
+            assert obs["rgbd"]["rgb"][i].tobytes() == o["rgbd"]["rgb"].tobytes()
+            assert obs["rgbd"]["depth"][i].tobytes() == o["rgbd"]["depth"].tobytes()
+            np.testing.assert_array_equal(obs["state"]["pose"][i], o["state"]["pose"])
+    assert resets >= 1  # the episodes ended (speed 0.2–1 m/s, random turns) and the envs went on
