@@ -204,7 +204,9 @@ def test_views_rendered_together_equal_each_rendered_alone(size: tuple[int, int]
         for name in ("rgb", "depth", "alpha", "rgb_float"):
             assert getattr(got, name).tobytes() == getattr(alone, name).tobytes(), name
     shared = render_batch(room, [cam for _, cam in views], "numba")
-    assert all(a.rgb.tobytes() == render(room, cam, "numba").rgb.tobytes() for a, (_, cam) in zip(shared, views, strict=True))
+    assert all(
+        a.rgb.tobytes() == render(room, cam, "numba").rgb.tobytes() for a, (_, cam) in zip(shared, views, strict=True)
+    )
     with pytest.raises(ValueError, match="same size"):
         render_views([(room, views[0][1]), (room, robot_camera(0, 0, 0, 0.8, 70.0, 32, 24))], "numba")
 
