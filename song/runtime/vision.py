@@ -172,6 +172,8 @@ class SceneView:
         self._model: object | None = None
         self._scenes: dict[Path | None, GaussianSet] = {}
         self._probes: dict[Path | None, ProbeGrid | None] = {}
+        self._scene: GaussianSet | None = None
+        self._probe_grid: ProbeGrid | None = None
         self._episode: Episode | None = None
         self._avatars: dict[int, _Avatar] = {}
         self._last: tuple[tuple, RenderOutput] | None = None
@@ -191,6 +193,8 @@ class SceneView:
             if len(self._probes) >= SCENE_CACHE:
                 self._probes.pop(next(iter(self._probes)))
             self._probes[episode.usd_path] = scene_probes(episode.usd_path)
+        # this episode's own references: a cache shared with other envs may drop them while we render
+        self._scene, self._probe_grid = self._scenes[key], self._probes[episode.usd_path]
         self._episode = episode
         self._avatars = {}
         self._last = None
@@ -225,7 +229,7 @@ class SceneView:
         """
         sets = []
         tracks = self._episode.pedestrians
-        probes = self._probes.get(self._episode.usd_path)
+        probes = self._probe_grid
         if probes is not None and indices:
             _, roots, _ = pedestrian_states([tracks[k] for k in indices], t)
             factors = probe_irradiance(probes, roots) / math.pi * 2.0**probes.exposure_ev
@@ -260,7 +264,7 @@ class SceneView:
             pose.x, pose.y, pose.yaw, cam_cfg.height_m, cam_cfg.hfov_deg, width, height, cam_cfg.near_m, cam_cfg.far_m
         )
         people = self.posed_avatars(self.visible_pedestrians(pose, t, cam_cfg.far_m, cam_cfg.hfov_deg), t)
-        return key, [self._scenes[self._episode.gaussians_path], *people], camera
+        return key, [self._scene, *people], camera
 
     def accept(self, key: tuple, frame: RenderOutput) -> RenderOutput:
         """The rendered ``frame`` of :meth:`request`'s view through the camera model; cached for ``key``."""

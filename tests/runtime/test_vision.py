@@ -98,3 +98,36 @@ def test_avatars_take_the_scene_light_and_cast_a_contact_shadow(make_scene) -> N
     assert grey(c[1]) > grey(b[1]) + 0.02
     out = lit.render(pose, 0.0, W, H)
     assert np.isfinite(out.depth).any()
+
+
+def test_scene_views_sharing_a_cache_keep_the_scene_they_render(monkeypatch) -> None:
+    """A cache shared by the envs of one process may drop a scene another env still renders: that env keeps
+    its own reference, and views rendered together equal views rendered alone."""
+    import song.runtime.vision as vision
+    from song.render import GaussianSet
+
+    def fake_scene(path):  # a wall of Gaussians 3 m ahead, its grey level from the path
+        ys, zs = np.meshgrid(np.linspace(1.0, 6.0, 60), np.linspace(0.0, 2.0, 30))
+        n = ys.size
+        means = np.column_stack([np.full(n, 4.0), ys.ravel(), zs.ravel()])
+        grey = 0.3 if str(path).endswith("a") else 0.8
+        return GaussianSet.from_raw(means, np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), np.log(0.05)),
+                                    np.full(n, 4.0), np.full((n, 3), (grey - 0.5) / 0.28209479177387814))  # fmt: skip
+
+    monkeypatch.setattr(vision, "scene_gaussians", fake_scene)
+    monkeypatch.setattr(vision, "SCENE_CACHE", 1)
+    base = episode(start=(1.0, 3.5), peds=[])
+    a, b = (replace(base, gaussians_path=Path(name)) for name in ("scene_a", "scene_b"))
+    first, second = SceneView(backend="numba"), SceneView(backend="numba")
+    second.share_scenes(first)
+    first.reset(a)
+    second.reset(b)  # evicts scene_a from the shared cache while the first view is still on it
+    pose = Pose(1.0, 3.5, 0.0)
+    vision.render_together([(first, pose, 0.0, W, H, (0.0, 0.0)), (second, pose, 0.0, W, H, (0.0, 0.0))])
+    together = first.render(pose, 0.0, W, H), second.render(pose, 0.0, W, H)
+    alone = SceneView(backend="numba"), SceneView(backend="numba")
+    alone[0].reset(a)
+    alone[1].reset(b)
+    for got, view in zip(together, alone, strict=True):
+        assert got.rgb.tobytes() == view.render(pose, 0.0, W, H).rgb.tobytes()
+    assert together[0].rgb[H // 2, W // 2, 0] < together[1].rgb[H // 2, W // 2, 0]  # each its own scene
