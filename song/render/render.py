@@ -142,13 +142,22 @@ def _render_reference(sets: Sequence[GaussianSet], camera: Camera, background: n
     return RenderOutput(to_uint8(rgb), depth.astype(np.float32), alpha.astype(np.float32), rgb.astype(np.float32))
 
 
-_GSPLAT_STATE: dict[str, str] = {}  # "error" once gsplat failed in this process
+_GSPLAT_STATE: dict[str, str] = {}  # "error" once gsplat failed in this process; "checked": the answer
 
 
 def gsplat_available() -> str:
-    """Why the gsplat backend cannot run here (one line), or the empty string when it can."""
+    """Why the gsplat backend cannot run here (one line), or the empty string when it can.
+
+    Asked once per process (asking torch for a CUDA device took ~5 ms, every step of the closed loop).
+    """
     if "error" in _GSPLAT_STATE:
         return _GSPLAT_STATE["error"]
+    if "checked" not in _GSPLAT_STATE:
+        _GSPLAT_STATE["checked"] = _gsplat_check()
+    return _GSPLAT_STATE["checked"]
+
+
+def _gsplat_check() -> str:
     try:
         import torch
     except ImportError:

@@ -1,0 +1,141 @@
+"""Where compositing spends its work: contributions per pixel and how far transmittance falls, per view.
+
+    .venv/bin/python benchmarks/render_layers.py --bench runs/demo-bench [--episodes 6] [--resolution 320x240]
+
+For the robot camera at the start of the first ``--episodes`` test episodes of a release (scene and
+posed avatars, as the runtime renders them), it runs the numba compositing kernel with counters
+inserted into a copy of its source at run time (so the counted kernel is the shipped one, line for
+line): Gaussians visited per tile, pixels tested, σ tests passed, contributions (α ≥ 1/255 before
+the pixel stops), and the final transmittance of every pixel. Also, from a numpy model of one
+surface (a jittered grid of surfels with SONG's σ = 0.6 spacings and opacity 0.993), the share of
+pixels whose transmittance falls to the stopping threshold 1e-4 within that one surface.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import inspect
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import emit  # noqa: E402
+
+from song.datasets.bench import open_benchmark  # noqa: E402
+from song.render import _render_kernel as kernel  # noqa: E402
+from song.runtime.robot import Pose  # noqa: E402
+from song.runtime.vision import SceneView  # noqa: E402
+
+COUNTERS = {  # (line of the kernel, counter index) inserted after that line
+    "            a = attr[ids[e]]\n": 0,
+    "            for i in range(r0, r1):\n": 1,
+    "                for j in range(j0, j1):\n": 2,
+    "                    alpha = min(ALPHA_MAX, o * exp_neg(sigma))\n": 3,
+    "                    w = alpha * tp\n": 4,
+}
+NAMES = ("gaussians_visited", "rows_visited", "pixels_tested", "sigma_passed", "contributions")
+
+
+def counted_kernel():
+    """The compositing kernel with ``counts[t, k] += 1`` after each line of :data:`COUNTERS`."""
+    source = inspect.getsource(sys.modules[kernel.__name__])
+    start = source.index("@numba.njit(cache=True, parallel=True, fastmath=True)\ndef composite_kernel")
+    body = source[start:].replace("@numba.njit(cache=True, parallel=True, fastmath=True)", "@numba.njit(parallel=True)")
+    body = body.replace(
+        "background, out_rgb, out_depth, out_alpha):", "background, out_rgb, out_depth, out_alpha, counts):", 1
+    )
+    for line, k in COUNTERS.items():
+        indent = " " * (len(line) - len(line.lstrip()) + (4 if line.rstrip().endswith(":") else 0))
+        assert line in body, line
+        body = body.replace(line, f"{line}{indent}counts[t, {k}] += 1\n", 1)
+    path = Path(tempfile.mkdtemp()) / "counted_kernel.py"
+    path.write_text(source[:start] + body)
+    spec = importlib.util.spec_from_file_location("counted_kernel", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.composite_kernel
+
+
+def one_surface(opacity: float = 1 / (1 + np.exp(-5.0)), sigma: float = 0.6, trials: int = 400) -> dict:
+    """Transmittance through one surface of jittered surfels (spacing 1), as SONG synthesises them."""
+    rng = np.random.default_rng(0)
+    g = np.arange(-5, 6)
+    lattice = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2).astype(float)
+    finals = []
+    for _ in range(trials):
+        centres = lattice + rng.uniform(-0.25, 0.25, lattice.shape)
+        pixels = rng.uniform(0, 1, (50, 2))
+        d2 = ((pixels[:, None] - centres[None]) ** 2).sum(-1)
+        alpha = np.minimum(kernel.ALPHA_MAX, opacity * np.exp(-d2 / (2 * sigma**2)))
+        finals.append(np.prod(np.where(alpha >= kernel.ALPHA_MIN, 1 - alpha, 1.0), axis=1))
+    t = np.concatenate(finals)
+    return {"median_T": float(np.median(t)), "p99_T": float(np.percentile(t, 99)),
+            "share_reaching_1e-4": float((t <= kernel.T_MIN).mean())}  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bench", required=True)
+    parser.add_argument("--episodes", type=int, default=6)
+    parser.add_argument("--resolution", default="320x240")
+    args = parser.parse_args()
+    width, height = (int(v) for v in args.resolution.split("x"))
+    composite = counted_kernel()
+    bench = open_benchmark(args.bench)
+    view = SceneView("numba")
+    rows = []
+    for summary in list(bench.episodes(split="test"))[: args.episodes]:
+        episode = dataclasses.replace(bench.episode(summary.episode_id), params=bench.params)
+        view.reset(episode)
+        pose = Pose(float(episode.start_xy[0]), float(episode.start_xy[1]), float(episode.start_yaw))
+        _, sets, camera = view.request(pose, 1.0, width, height)
+        profile: dict = {}
+        stages = render_module_stages(sets, camera, profile)
+        offsets, ids, attr, tiles_x, tiles_y = stages
+        counts = np.zeros((tiles_x * tiles_y, len(NAMES)), np.int64)
+        rgb = np.empty((1, height, width, 3), np.float32)
+        depth = np.empty((1, height, width), np.float32)
+        alpha = np.empty((1, height, width), np.float32)
+        composite(offsets, ids, attr, width, height, tiles_x, tiles_y, np.zeros(3), rgb, depth, alpha, counts)
+        per_pixel = counts.sum(axis=0) / (width * height)
+        t = 1.0 - alpha[0].astype(np.float64)
+        rows.append({"episode": summary.episode_id, **{n: round(float(v), 2) for n, v in zip(NAMES, per_pixel, strict=True)},
+                     "pixels_stopped_at_1e-4": round(float((t <= kernel.T_MIN * 1.0001).mean()), 4),
+                     "median_final_T": float(np.median(t)), "tile_list_entries_per_pixel": round(len(ids) / (width * height), 2)})  # fmt: skip
+    emit({"resolution": args.resolution, "views": rows, "one_surface_model": one_surface()})
+
+
+def render_module_stages(sets, camera, profile):
+    """Projection, sort and binning of one view exactly as :func:`song.render.render` does them."""
+    from song.render.render import EPS2D, visible_chunks
+
+    selections = [(s, visible_chunks(s, camera)) for s in sets if len(s)]
+    total = sum(len(sel) for _, sel in selections)
+    attr = np.empty((total, kernel.N_ATTR), np.float32)
+    depth = np.empty(total)
+    rect = np.empty((total, 4), np.int64)
+    valid = np.zeros(total, np.bool_)
+    offset = 0
+    for s, sel in selections:
+        kernel.project_kernel(
+            s.means, s.quats, s.scales, s.opacities, s.log_alpha_range(), s.sh, s.sh_degree, sel,
+            np.ascontiguousarray(camera.rotation, np.float64), np.ascontiguousarray(camera.translation, np.float64),
+            np.ascontiguousarray(camera.position, np.float64), float(camera.fx), float(camera.fy), float(camera.cx),
+            float(camera.cy), int(camera.width), int(camera.height), float(camera.near), float(camera.far), EPS2D,
+            offset, 0, attr, depth, rect, valid,
+        )  # fmt: skip
+        offset += len(sel)
+    order = kernel.depth_order(np.flatnonzero(valid), depth)
+    tiles_x = (camera.width + kernel.TILE - 1) // kernel.TILE
+    tiles_y = (camera.height + kernel.TILE - 1) // kernel.TILE
+    offsets, ids = kernel.bin_kernel(order, rect, tiles_x, tiles_y, 8)
+    return offsets, ids, attr, tiles_x, tiles_y
+
+
+if __name__ == "__main__":
+    main()
