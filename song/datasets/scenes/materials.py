@@ -12,6 +12,12 @@ A material is a base colour plus a texture kind evaluated on surface coordinates
 
 Noise is hashed value noise on an integer lattice, seeded, so the same scene and seed give the same
 colours. Colours are linear-ish sRGB in [0, 1].
+
+**Instances differ.** ``"<material>~k"`` (k < :data:`VARIANTS`) is variant k of a material: its base
+colour brighter or darker by up to 12 % and warmer or cooler by up to 3 %, its pattern drawn at
+0.8–1.25 times the size (tiles, boards) and from its own noise seed. The scene synthesis gives every
+object instance the variant its id hashes to, so the chairs of a room are not one colour and one
+grain, the way real furniture of one kind differs by batch, wear and light history.
 """
 
 from __future__ import annotations
@@ -23,11 +29,12 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Material:
-    """A base colour (3,) in [0, 1] and a texture kind (see the module docstring)."""
+    """A base colour (3,) in [0, 1], a texture kind (see the module docstring) and its pattern's scale."""
 
     name: str
     base: tuple[float, float, float]
     texture: str
+    scale: float = 1.0  # tile and board sizes are multiplied by this
 
 
 MATERIALS: dict[str, Material] = {
@@ -170,8 +177,25 @@ def linear_to_srgb(c: np.ndarray | float) -> np.ndarray:
     return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(np.maximum(c, 0.0), 1 / 2.4) - 0.055)
 
 
+VARIANTS = 5  # variants per material (instances pick one by their id)
+_BRIGHTNESS = (1.0, 1.06, 0.94, 1.12, 0.88)  # variant 0 is the material as listed
+_WARMTH = (0.0, -0.02, 0.03, 0.01, -0.03)  # + warmer (more red, less blue), − cooler
+_SCALE = (1.0, 1.25, 0.8, 1.1, 0.9)
+
+
+def variant(name: str, k: int) -> str:
+    """The name of variant ``k`` of material ``name`` (``"wood_medium~3"``)."""
+    return f"{name}~{k % VARIANTS}"
+
+
 def material_of(name: str) -> Material:
-    """A material by name; ``"paint:#rrggbb"`` is a plaster wall of that colour."""
+    """A material by name; ``"paint:#rrggbb"`` is a plaster wall of that colour, ``"name~k"`` a variant."""
+    if "~" in name:
+        root, k = name.rsplit("~", 1)
+        m, k = material_of(root), int(k) % VARIANTS
+        warm = np.array([1 + _WARMTH[k], 1.0, 1 - _WARMTH[k]])
+        base = np.clip(np.asarray(m.base) * _BRIGHTNESS[k] * warm, 0.0, 1.0)
+        return Material(name, tuple(float(c) for c in base), m.texture, m.scale * _SCALE[k])
     if name.startswith("paint:#") and len(name) == 13:
         rgb = tuple(int(name[7 + 2 * k : 9 + 2 * k], 16) / 255.0 for k in range(3))
         return Material(name, rgb, "plaster")
@@ -186,6 +210,7 @@ def texture(material: str, u: np.ndarray, v: np.ndarray, seed: int) -> np.ndarra
     if m.texture == "plaster":
         tone = 1.0 + 0.05 * (value_noise(u, v, 0.8, seed) - 0.5) + 0.02 * (value_noise(u, v, 0.05, seed + 1) - 0.5)
         return base * tone[:, None]
+    u, v = u / m.scale, v / m.scale  # the pattern at its size
     if m.texture == "wood":
         board = np.floor(v / 0.16)
         tone = 0.85 + 0.3 * _hash(board, board * 7 + 3, seed)

@@ -34,7 +34,7 @@ import numpy as np
 from song.config import SURFEL_SPACING_M
 from song.datasets.scenes.dressing import Dressing, DressingHints, build_dressing
 from song.datasets.scenes.furniture import Part
-from song.datasets.scenes.materials import texture
+from song.datasets.scenes.materials import texture, variant
 from song.datasets.scenes.ply import SH_C0, GaussianCloud
 from song.geometry.freespace import clearance_field
 from song.util import derive_rng
@@ -54,6 +54,13 @@ SORT_CELL_M = 0.5
 
 _MATERIAL_CODES: dict[str, int] = {}  # material name → small int, for grouping samples by material
 _MATERIAL_NAMES: list[str] = []
+
+
+def _instance_material(p: Part) -> str:
+    """The material variant of a part's object (every part of one object shares it; doors and frames do not vary)."""
+    if p.group in ("lintel", "frame", "door") or p.material.startswith("paint:"):
+        return p.material
+    return variant(p.material, zlib.crc32(p.group.encode()))
 
 
 def _codes(names) -> np.ndarray:
@@ -155,7 +162,7 @@ def _box_faces(parts: list[Part]) -> tuple:
         }
         for name, (o, eu, ev, lu, lv, standing) in faces.items():
             if name not in p.hidden and lu > 1e-4 and lv > 1e-4:
-                rows.append((o, eu, ev, lu, lv, p.material, standing))
+                rows.append((o, eu, ev, lu, lv, _instance_material(p), standing))
     if not rows:
         return (np.zeros((0, 3)),) * 3 + (np.zeros(0),) * 2 + (np.zeros(0, object), np.zeros(0, bool))
     o, eu, ev, lu, lv, m, st = zip(*rows, strict=True)
@@ -188,13 +195,13 @@ def _round_parts(parts: list[Part], spacing: float, rng) -> _Samples:
                     s,
                     s,
                     np.column_stack([a * rx, z]),
-                    np.full(len(a), _codes([p.material])[0]),
+                    np.full(len(a), _codes([_instance_material(p)])[0]),
                     ao,
                 )
             )
             top = _faces(
                 np.array([[cx - rx, cy - ry, p.z1]]), np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]),
-                np.array([2 * rx]), np.array([2 * ry]), np.array([p.material], object), np.array([False]), spacing, rng,
+                np.array([2 * rx]), np.array([2 * ry]), np.array([_instance_material(p)], object), np.array([False]), spacing, rng,
             )  # fmt: skip
             inside = ((top.pos[:, 0] - cx) / rx) ** 2 + ((top.pos[:, 1] - cy) / ry) ** 2 <= 1
             out.append(_Samples(*(getattr(top, f)[inside] for f in _Samples.__dataclass_fields__)))
@@ -215,7 +222,9 @@ def _round_parts(parts: list[Part], spacing: float, rng) -> _Samples:
             s = np.full(count, WIDTH_FACTOR * spacing)
             ao = 0.75 + 0.25 * (n[:, 2] + 1) / 2
             quat = frame_quats(t1, np.cross(n, t1), n)
-            out.append(_Samples(pos, quat, n, s, s, pos[:, :2] * 7.0, np.full(count, _codes([p.material])[0]), ao))
+            out.append(
+                _Samples(pos, quat, n, s, s, pos[:, :2] * 7.0, np.full(count, _codes([_instance_material(p)])[0]), ao)
+            )
     return _Samples.concat(out)
 
 
@@ -329,8 +338,8 @@ def _albedo(s: _Samples, seed: int, flat: bool = False) -> np.ndarray:
     for k, code in enumerate(codes):
         rows = order[bounds[k] : bounds[k + 1]]
         name = _MATERIAL_NAMES[code]
-        if flat:
-            colour[rows] = material_of(name).base
+        if flat:  # the material's own base colour, as the reference renders read it from the USD proxy
+            colour[rows] = material_of(name.split("~")[0]).base
         else:
             colour[rows] = texture(name, s.uv[rows, 0], s.uv[rows, 1], seed + zlib.crc32(name.encode()) % 65521)
     return colour

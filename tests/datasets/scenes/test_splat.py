@@ -284,3 +284,28 @@ def test_usd_proxy_is_ready_for_a_simulator(office: Path) -> None:
         r.type for r in package.semantic_map.regions
     }
     assert all(UsdGeom.Imageable(r).GetPurposeAttr().Get() == "guide" for r in rooms)
+
+
+def test_instances_of_one_material_differ_and_one_instance_is_one_tone(office: Path) -> None:
+    """The desks of an office are not one colour: each object takes the variant its id hashes to, every
+    part of it the same one; the unvaried material stays what the flat (reference-render) colours use."""
+    from song.datasets.scenes.materials import VARIANTS, material_of, variant
+    from song.datasets.scenes.splat import _instance_material
+
+    package = load_scene_package(office)
+    hints = DressingHints.from_json(read_usd_dressing(office / USD_PROXY))
+    dressing = build_dressing(package.semantic_map, package.occupancy, hints)
+    by_object: dict[str, set[str]] = {}
+    for part in dressing.parts:
+        if part.group not in ("lintel", "frame", "door"):
+            by_object.setdefault(part.group, set()).add(_instance_material(part))
+    assert all(len({name.split("~")[1] for name in names}) == 1 for names in by_object.values())  # one variant each
+    materials: dict[str, set[str]] = {}
+    for part in dressing.parts:
+        materials.setdefault(part.material, set()).add(_instance_material(part))
+    shared = [names for names in materials.values() if len(names) > 1]
+    assert shared  # several instances of one material took different variants
+    bases = {material_of(variant("wood_medium", k)).base for k in range(VARIANTS)}
+    assert len(bases) == VARIANTS and material_of(variant("wood_medium", 0)).base == material_of("wood_medium").base
+    tiles = [material_of(variant("tiles_grey", k)).scale for k in range(VARIANTS)]
+    assert min(tiles) == 0.8 and max(tiles) == 1.25
