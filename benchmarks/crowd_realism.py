@@ -226,8 +226,11 @@ def markdown(rows: dict[str, dict]) -> str:
         ("pairs < 2 m passing < 0.6 m", lambda s: s["passes"]["all"]["below_0.6"]),
         ("speed median (p95), m/s", lambda s: f"{s['speed_median_mps']} ({s['speed_p95_mps']})"),
         ("standing share", lambda s: s["standing_share"]),
-        ("tortuosity", lambda s: s["tortuosity_median"]),
-        ("accel RMS, m/s²", lambda s: s["acceleration_rms_mps2"]),
+        ("tortuosity median (p95)", lambda s: f"{s['tortuosity_median']} ({s['tortuosity_p95']})"),
+        (
+            "accel RMS (steady walking), m/s²",
+            lambda s: f"{s['acceleration_rms_mps2']} ({s['acceleration_rms_steady_mps2']})",
+        ),
         ("heading reversals / walking min", lambda s: s["heading_reversals_per_walking_min"]),
         ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),
         ("density, /m² covered (walkable)", _density_cell),

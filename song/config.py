@@ -94,7 +94,10 @@ class CrowdConfig(_Section):
     )
     time_horizon_obst_s: float = Field(1.0, gt=0.0, description="ORCA obstacle time horizon, s")
     max_accel_mps2: float = Field(
-        2.0, gt=0.0, description="acceleration limit, m/s²: of the speed, and sideways in a turn (docs/crowd.md)"
+        2.0, gt=0.0, description="acceleration limit of the speed (setting off, stopping, turning back), m/s²"
+    )
+    turn_accel_mps2: float = Field(
+        1.0, gt=0.0, description="sideways acceleration limit in a turn of up to 90°, m/s² (docs/crowd.md)"
     )
     max_duration_s: float = Field(120.0, gt=0.0, description="longest simulated scenario, s")
     stall_time_s: float = Field(2.0, gt=0.0, description="no progress for this long = stalled, s")

@@ -117,22 +117,23 @@ def _constrain(px, py, qx, qy, stamp, tick, va, vb, verts, tris, seg_tri, hgrid,
 
 
 @numba.njit(cache=True, nogil=True)
-def accelerate(vx, vy, wx, wy, limit):  # pragma: no cover
+def accelerate(vx, vy, wx, wy, limit, turn_limit=-1.0):  # pragma: no cover
     """One frame's velocity from ``(vx, vy)`` toward the wanted ``(wx, wy)``: ``(new vx, new vy)``.
 
     A walker under way that turns by at most 90° keeps its speed through the turn: its heading turns as
-    fast as a sideways acceleration of ``limit`` per frame allows (``limit / speed`` radians a frame) and
-    its speed changes by at most ``limit``. Otherwise (setting off, stopping, turning back) the change of
+    fast as a sideways acceleration of ``turn_limit`` per frame allows (``turn_limit / speed`` radians a
+    frame; ``limit`` when negative) and its speed changes by at most ``limit``. Otherwise (setting off, stopping, turning back) the change of
     the velocity vector is clamped to ``limit``: it slows down and sets off the other way. (Clamping the
     vector change in a turn too cuts across the circle: a 45° swerve at 1.3 m/s dipped to 1.2 m/s, a 90°
     one to 0.92 m/s; docs/crowd.md.)
     """
     s0, s1 = np.hypot(vx, vy), np.hypot(wx, wy)
+    sideways = limit if turn_limit < 0.0 else turn_limit
     if s0 > limit and s1 > limit:  # under way, and staying so
         heading = np.arctan2(vy, vx)
         rest = (np.arctan2(wy, wx) - heading + np.pi) % (2.0 * np.pi) - np.pi  # the turn wanted, in [-pi, pi)
         if abs(rest) <= 0.5 * np.pi:
-            turn = min(max(rest, -limit / s0), limit / s0)
+            turn = min(max(rest, -sideways / s0), sideways / s0)
             s = min(max(s1, s0 - limit), s0 + limit)
             return s * np.cos(heading + turn), s * np.sin(heading + turn)
     dvx, dvy = wx - vx, wy - vy
@@ -164,7 +165,9 @@ def _move(px, py, qx, qy, limit, stamp, tick, mesh):  # pragma: no cover
 
 
 @numba.njit(cache=True, nogil=True)
-def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, mesh):  # pragma: no cover
+def settle_moves(
+    pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, mesh, turn_limit=-1.0
+):  # pragma: no cover
     """The frame's moves from the avoidance model's velocities: ``(new positions (N, 2), velocities (N, 2))``.
 
     ``wanted`` (M, 2) are the new velocities of pedestrians ``rows`` (M,); the others' are 0.
@@ -188,7 +191,7 @@ def settle_moves(pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dis
     for i in range(n):
         if not moving[i]:
             continue
-        vx, vy = accelerate(vel[i, 0], vel[i, 1], full[i, 0], full[i, 1], accel_limit)
+        vx, vy = accelerate(vel[i, 0], vel[i, 1], full[i, 0], full[i, 1], accel_limit, turn_limit)
         target[i, 0], target[i, 1], tick = _move(pos[i, 0], pos[i, 1], pos[i, 0] + vx * dt, pos[i, 1] + vy * dt,
                                                  speed[i] * dt, stamp, tick, mesh)  # fmt: skip
     for _ in range(passes):

@@ -44,11 +44,12 @@ def preferred_velocities_reference(pos, cur, nxt, has_next, goal, speed, moving,
     return pref
 
 
-def accelerate_reference(vel: np.ndarray, wanted: np.ndarray, limit: float) -> np.ndarray:
+def accelerate_reference(vel: np.ndarray, wanted: np.ndarray, limit: float, turn_limit: float = -1.0) -> np.ndarray:
     """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.accelerate` (with complex numbers)."""
     v, w = complex(*vel), complex(*wanted)
+    sideways = limit if turn_limit < 0 else turn_limit
     if abs(v) > limit and abs(w) > limit and abs(np.angle(w / v)) <= np.pi / 2:
-        turn = np.clip(np.angle(w / v), -limit / abs(v), limit / abs(v))
+        turn = np.clip(np.angle(w / v), -sideways / abs(v), sideways / abs(v))
         new = v / abs(v) * np.exp(1j * turn) * np.clip(abs(w), abs(v) - limit, abs(v) + limit)
     else:
         new = v + (w - v) * min(1.0, limit / max(abs(w - v), 1e-300))
@@ -68,14 +69,17 @@ def _move_reference(mesh, pos: np.ndarray, target: np.ndarray, limit: np.ndarray
     return target
 
 
-def settle_moves_reference(mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes):
+def settle_moves_reference(
+    mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, turn_limit=-1.0
+):
     """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.settle_moves` (numpy and navmesh calls).
 
     ``mesh`` is the :class:`song.geometry.navmesh.Navmesh` itself.
     """
     full = np.zeros_like(vel)
     full[rows] = wanted
-    new_vel = np.array([accelerate_reference(v, f, accel_limit) for v, f in zip(vel, full, strict=True)]).reshape(-1, 2)
+    new_vel = np.array([accelerate_reference(v, f, accel_limit, turn_limit) for v, f in zip(vel, full, strict=True)])
+    new_vel = new_vel.reshape(-1, 2)
     new_vel[~moving] = 0.0
     target = pos.copy()
     max_step = speed * dt

@@ -11,8 +11,11 @@ measured. With ``MOVING_MPS`` = 0.2 m/s as the walking threshold:
   ``INTERACTION_M`` (2 m) -- classified by the angle between their velocities at that moment:
   head-on (> 135°), crossing, same direction (< 45°); p5/p25/median and the shares below 0.5, 0.6 and
   0.8 m per class, and the share of all such pairs passing closer than 0.6 m;
-- **tortuosity**: path length over displacement in 5 s windows of walking (displacement ≥ 1 m);
-- **acceleration RMS** over moving samples (finite differences of the resampled velocity);
+- **tortuosity**: path length over displacement in 5 s windows of walking (displacement ≥ 1 m), median and p95;
+- **acceleration RMS** over moving samples (finite differences of the resampled velocity), and over
+  steady walking alone (moving samples at least ``STEADY_S`` from any standing one: no setting off or
+  stopping, which SONG's walkers do at every stop of their routines and the outdoor recordings' passers-by
+  rarely do in view);
 - **density**: the mean number of pedestrians present per m², over the samples at which anyone is,
   on the floor the recording's people covered (:func:`covered_area`: the 0.5 m cells holding any of
   their samples; the real recordings give no walkable area), and, where it is known, on the walkable
@@ -41,6 +44,7 @@ MOVING_MPS = 0.2
 INTERACTION_M = 2.0
 HEAD_ON_DEG, SAME_DIR_DEG = 135.0, 45.0
 WINDOW_S = 5.0
+STEADY_S = 2.0  # steady walking: this far in time from any standing sample (setting off takes 1–2 s)
 COVER_CELL_M = 0.5
 SWING_DEG, SWING_FRAMES, REVERSAL_FRAMES = 20.0, 3, 12  # a swing: > 20° in 3 frames; back within 12 (0.4 s at 30 FPS)
 
@@ -63,6 +67,11 @@ def resample(tracks: list[Track], rate_hz: float = RATE_HZ) -> list[Track]:
             xy = np.column_stack([np.interp(grid, track.t, track.xy[:, k]) for k in range(2)])
             out.append(Track(grid, xy))
     return out
+
+
+def _rms(parts: list[np.ndarray]) -> float | None:
+    values = np.concatenate(parts) if parts else np.zeros(0)
+    return round(float(np.sqrt(np.mean(values**2))), 3) if len(values) else None
 
 
 def _velocity(track: Track) -> np.ndarray:
@@ -145,7 +154,7 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         groups = [groups]
     groups = [resample(group) for group in groups]
     tracks = [track for group in groups for track in group]
-    speeds, standing, active_standing, active_total, tortuosity, accel = [], 0, 0, 0, [], []
+    speeds, standing, active_standing, active_total, tortuosity, accel, steady = [], 0, 0, 0, [], [], []
     total = 0
     for track in tracks:
         v = _velocity(track)
@@ -160,6 +169,10 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
             active_standing += int((~moving[lo : hi + 1]).sum())
             a = np.gradient(v, track.t, axis=0)
             accel.append(np.hypot(*a[moving].T))
+            reach = int(round(STEADY_S * RATE_HZ))
+            window = np.convolve((~moving).astype(int), np.ones(2 * reach + 1, int))  # length n + 2·reach
+            near_stop = window[reach : reach + len(moving)] > 0
+            steady.append(np.hypot(*a[moving & ~near_stop].T))
         span = int(round(WINDOW_S * RATE_HZ))
         for start in range(0, len(track.t) - span, span):
             seg = track.xy[start : start + span + 1]
@@ -181,7 +194,9 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         "standing_share": round(standing / max(total, 1), 4),
         "standing_share_active": round(active_standing / max(active_total, 1), 4),
         "tortuosity_median": round(float(np.median(tortuosity)), 4) if tortuosity else None,
+        "tortuosity_p95": round(float(np.percentile(tortuosity, 95)), 4) if tortuosity else None,
         "acceleration_rms_mps2": round(float(np.sqrt(np.mean(np.concatenate(accel) ** 2))), 3) if accel else None,
+        "acceleration_rms_steady_mps2": _rms(steady),
         "passes": {kind: _summary(values) for kind, values in passes.items()},
     }
     covered = [density(group, covered_area(group)) for group in groups if group]

@@ -10,8 +10,9 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
 3. local avoidance among all pedestrians and the walls, through the avoidance seam
    (:mod:`song.pipeline.crowd.avoidance`; ``crowd.avoidance = "orca"``: ORCA against the navmesh grown
    back by r + 5 mm, i.e. the un-eroded free space, so a pedestrian on the mesh never overlaps a wall);
-4. acceleration limit (``crowd.max_accel_mps2``: a turn of up to 90° keeps the speed, with the heading
-   turning at that sideways acceleration; starting, stopping and turning back clamp the velocity change);
+4. acceleration limits: a turn of up to 90° keeps the speed, the heading turning at the sideways
+   acceleration ``crowd.turn_accel_mps2`` (1 m/s²); the speed changes by at most ``crowd.max_accel_mps2``
+   (2 m/s²), and starting, stopping and turning back clamp the velocity change to it;
    moves constrained to the navmesh (sliding along its boundary); overlap resolution passes (pairs
    pushed apart within each pedestrian's speed budget, again on the mesh);
 5. stall detection: no progress along the path for ``stall_time_s`` → a full replan around everyone
@@ -417,7 +418,7 @@ def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.nd
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
         w.pos, w.vel, rows, new_vel, moving, w.speed, dt, cfg.max_accel_mps2 * dt, 2 * r + OVERLAP_MARGIN_M, OVERLAP_PASSES,
-        mesh.move_args(),
+        mesh.move_args(), cfg.turn_accel_mps2 * dt,
     )  # fmt: skip
 
 

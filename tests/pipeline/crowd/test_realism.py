@@ -59,6 +59,20 @@ def test_speed_and_standing_share() -> None:
     assert stats["standing_share"] == pytest.approx(0.5, abs=0.03)
 
 
+def test_steady_acceleration_leaves_setting_off_and_stopping_out() -> None:
+    """A walker who stands, sets off at 2 m/s² to 1.2 m/s, walks straight and stops: the steady figure is 0,
+    the overall one is not; a path's tortuosity p95 is reported beside its median; a short track is fine."""
+    t = np.arange(0.0, 30.0, 0.1)
+    speed = np.clip(np.minimum(2.0 * (t - 5.0), 2.0 * (25.0 - t)), 0.0, 1.2)
+    x = np.concatenate([[0.0], np.cumsum(speed[:-1] * 0.1)])
+    track = Track(t, np.column_stack([x, np.zeros_like(x)]))
+    stats = crowd_statistics([track, walk((0.0, 9.0), (1.0, 0.0), 0.0, 0.6)])
+    assert stats["acceleration_rms_mps2"] > 0.3 and stats["acceleration_rms_steady_mps2"] == pytest.approx(
+        0.0, abs=1e-9
+    )
+    assert stats["tortuosity_p95"] == pytest.approx(1.0, abs=1e-9)
+
+
 def test_wall_clearances_are_taken_over_moving_samples() -> None:
     """A walk 0.3 m from a wall (y = 0) gives its body's gap at every 2.5 Hz sample; someone standing gives none."""
     along = walk((0.0, 0.3), (1.0, 0.0), 0.0, 10.0)

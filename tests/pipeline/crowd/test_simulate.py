@@ -202,5 +202,19 @@ def test_compiled_acceleration_equals_its_reference_twin() -> None:
     rng = np.random.default_rng(5)
     for _ in range(3000):
         v, w = (rng.normal(0, 1, 2) * rng.choice([0.01, 0.1, 1.0]) for _ in range(2))
-        limit = rng.choice([2 / 30, 0.5])
-        np.testing.assert_allclose(accelerate(*v, *w, limit), accelerate_reference(v, w, limit), atol=1e-12)
+        limit, turn = rng.choice([2 / 30, 0.5]), rng.choice([-1.0, 1 / 30, 0.3])
+        np.testing.assert_allclose(accelerate(*v, *w, limit, turn), accelerate_reference(v, w, limit, turn), atol=1e-12)
+
+
+def test_the_sideways_limit_sets_how_fast_a_walker_turns() -> None:
+    """With a sideways limit half the speed limit, a 45° swerve at 1.3 m/s takes twice the frames, at full speed."""
+    from song.pipeline.crowd._crowd_kernel import accelerate
+
+    limit, v, wanted = 2.0 / 30, (1.3, 0.0), 1.3 * np.array([np.cos(np.pi / 4), np.sin(np.pi / 4)])
+    for turn, frames in ((limit, 16), (limit / 2, 31)):
+        u, n = np.array(v), 0
+        while not np.allclose(u, wanted, atol=1e-12):
+            u = np.array(accelerate(*u, *wanted, limit, turn))
+            assert np.hypot(*u) == pytest.approx(1.3, abs=1e-12)
+            n += 1
+        assert n == frames
