@@ -232,7 +232,7 @@ class SongVectorEnv(gym.vector.VectorEnv if gym is not None else object):  # typ
     return. Env ``i`` is seeded with ``seed + i``. The envs share one cache of loaded scenes.
     """
 
-    metadata = {"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP if gym else None, "render_modes": []}
+    metadata = {"autoreset_mode": gym.vector.AutoresetMode.NEXT_STEP if gym else None, "render_modes": ["rgb_array"]}
 
     def __init__(self, bench: str, num_envs: int, **kwargs: Any) -> None:
         _require_gym()
@@ -241,6 +241,7 @@ class SongVectorEnv(gym.vector.VectorEnv if gym is not None else object):  # typ
         if num_envs < 1:
             raise ValueError(f"num_envs must be ≥ 1 (got {num_envs})")
         self.envs = [SongNavEnv(bench, **kwargs) for _ in range(num_envs)]
+        self.render_mode = self.envs[0].render_mode
         for env in self.envs[1:]:
             for (view, _, _), (first, _, _) in zip(
                 env.sensors.camera_views(), self.envs[0].sensors.camera_views(), strict=True
@@ -290,6 +291,15 @@ class SongVectorEnv(gym.vector.VectorEnv if gym is not None else object):  # typ
             infos = self._add_info(infos, info, i)
         self._ended = terminations | truncations
         return self._observe(), rewards, terminations, truncations, infos
+
+    def render(self) -> tuple | None:
+        """Each env's :meth:`SongNavEnv.render` (``render_mode="rgb_array"``), as Gymnasium's vector envs return them."""
+        return None if self.render_mode is None else tuple(env.render() for env in self.envs)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Close every env (Gymnasium's ``close`` calls this once)."""
+        for env in self.envs:
+            env.close()
 
 
 if gym is not None:  # so gym.make("song.runtime.env:song/SongNav-v1", ...) works with nothing else imported

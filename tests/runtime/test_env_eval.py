@@ -223,3 +223,25 @@ def test_the_batched_vector_env_equals_its_envs_stepped_alone() -> None:
             assert obs["rgbd"]["depth"][i].tobytes() == o["rgbd"]["depth"].tobytes()
             np.testing.assert_array_equal(obs["state"]["pose"][i], o["state"]["pose"])
     assert resets >= 1  # the episodes ended (speed 0.2–1 m/s, random turns) and the envs went on
+
+
+def test_the_batched_vector_env_works_with_gymnasiums_vector_wrappers() -> None:
+    """Gymnasium's own vector wrappers take it: episode statistics at episode ends, and rendering."""
+    pytest.importorskip("gymnasium")
+    from gymnasium.wrappers.vector import RecordEpisodeStatistics
+
+    from song.runtime.env import SongVectorEnv
+
+    vector = RecordEpisodeStatistics(SongVectorEnv(str(GOLDEN), 2, sensors=("state",), render_mode="rgb_array"))
+    vector.reset(seed=1)
+    ended = 0
+    for _ in range(400):
+        _, _, terminated, truncated, info = vector.step(np.tile([1.0, 0.0], (2, 1)).astype(np.float32))
+        if (terminated | truncated).any():
+            ended += 1
+            assert "episode" in info and info["episode"]["l"][info["_episode"]].min() >= 1
+            break
+    assert ended
+    frames = vector.render()
+    assert len(frames) == 2 and all(f.dtype == np.uint8 and f.ndim == 3 for f in frames)
+    vector.close()
