@@ -79,14 +79,36 @@ def synthetic_intents(mesh: Navmesh, count: int, seed: int) -> list[Intent]:
     return intents
 
 
+def give_up_dither(plan, intents) -> dict:
+    """For the walkers that gave up: how long they got no nearer their goal before giving up, and how
+    far they walked meanwhile (the dither the crowd issue asks to end within 5 s)."""
+    ids, stuck_s, walked = list(plan.ped_ids), [], []
+    for k, info in plan.status.items():
+        if info["status"] != "gave_up":
+            continue
+        xy = plan.xy[ids.index(k)]
+        end = int(float(info["reason"].split(" at ")[1].split(" s;")[0]) * plan.fps)
+        gap = np.linalg.norm(xy[: end + 1] - np.asarray(intents[k].goal_xy), axis=1)
+        best = np.minimum.accumulate(gap)
+        behind = np.flatnonzero(best > best[-1] + 0.1)  # frames before its last 10 cm of progress
+        start = behind[-1] + 1 if len(behind) else 0
+        stuck_s.append((end - start) / plan.fps)
+        walked.append(float(np.hypot(*np.diff(xy[start : end + 1], axis=0).T).sum()))
+    if not stuck_s:
+        return {}
+    return {"give_up_no_progress_s_median": round(float(np.median(stuck_s)), 1), "give_up_no_progress_s_max":
+            round(max(stuck_s), 1), "give_up_walked_m_median": round(float(np.median(walked)), 1)}  # fmt: skip
+
+
 def timed(intents, mesh, config) -> tuple[float, dict]:
-    """Wall seconds of one crowd plan, and its outcome counts."""
+    """Wall seconds of one crowd plan, and its outcome counts (and the give-up dither)."""
     cfg = config.crowd
     start = time.perf_counter()
     plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "lobby", "crowd"))
     seconds = time.perf_counter() - start
     counts = {kind: sum(v["status"] == kind for v in plan.status.values()) for kind in OUTCOMES}
-    return seconds, {"simulated_s": round((plan.xy.shape[1] - 1) / plan.fps, 1), **counts}
+    simulated = round((plan.xy.shape[1] - 1) / plan.fps, 1)
+    return seconds, {"simulated_s": simulated, **counts, **give_up_dither(plan, intents)}
 
 
 def main() -> None:
