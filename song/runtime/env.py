@@ -242,11 +242,10 @@ class SongVectorEnv(gym.vector.VectorEnv if gym is not None else object):  # typ
             raise ValueError(f"num_envs must be ≥ 1 (got {num_envs})")
         self.envs = [SongNavEnv(bench, **kwargs) for _ in range(num_envs)]
         self.render_mode = self.envs[0].render_mode
-        for env in self.envs[1:]:
-            for (view, _, _), (first, _, _) in zip(
-                env.sensors.camera_views(), self.envs[0].sensors.camera_views(), strict=True
-            ):
-                view.share_scenes(first)
+        first = [view for view, _, _ in self.envs[0].sensors.camera_views()]
+        for env in self.envs[1:] if first else ():
+            for view, _, _ in env.sensors.camera_views():
+                view.share_scenes(first[0])
         self.num_envs = num_envs
         self.single_observation_space = self.envs[0].observation_space
         self.single_action_space = self.envs[0].action_space
