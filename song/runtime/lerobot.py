@@ -170,7 +170,7 @@ def _info(version: str, kept: list[dict[str, Any]], frames: int, fps: float, spl
         "chunks_size": CHUNK_SIZE,
     }
     plans = kept[0]["plans"] if kept else []
-    videos = any(p.kind == "video" for p in plans)
+    videos = sum(p.kind == "video" for p in plans)  # video features: one file each per episode in v2.1
     if version == "v3.0":
         info |= {"data_files_size_in_mb": DATA_FILE_MB, "video_files_size_in_mb": VIDEO_FILE_MB}
         paths = V30
