@@ -122,8 +122,9 @@ def accelerate(vx, vy, wx, wy, limit, turn_limit=-1.0):  # pragma: no cover
 
     A walker under way that turns by at most 90° keeps its speed through the turn: its heading turns as
     fast as a sideways acceleration of ``turn_limit`` per frame allows (``turn_limit / speed`` radians a
-    frame; ``limit`` when negative) and its speed changes by at most ``limit``. Otherwise (setting off, stopping, turning back) the change of
-    the velocity vector is clamped to ``limit``: it slows down and sets off the other way. (Clamping the
+    frame; ``limit`` when negative) and its speed changes by at most ``limit``. Otherwise (setting off,
+    stopping, turning back) the change of the velocity vector is clamped to ``limit``: it slows down and
+    sets off the other way. (Clamping the
     vector change in a turn too cuts across the circle: a 45° swerve at 1.3 m/s dipped to 1.2 m/s, a 90°
     one to 0.92 m/s; docs/crowd.md.)
     """

@@ -195,7 +195,7 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         "standing_share_active": round(active_standing / max(active_total, 1), 4),
         "tortuosity_median": round(float(np.median(tortuosity)), 4) if tortuosity else None,
         "tortuosity_p95": round(float(np.percentile(tortuosity, 95)), 4) if tortuosity else None,
-        "acceleration_rms_mps2": round(float(np.sqrt(np.mean(np.concatenate(accel) ** 2))), 3) if accel else None,
+        "acceleration_rms_mps2": _rms(accel),
         "acceleration_rms_steady_mps2": _rms(steady),
         "passes": {kind: _summary(values) for kind, values in passes.items()},
     }
