@@ -33,6 +33,7 @@ from _common import emit  # noqa: E402
 
 from song.datasets.bench import open_benchmark  # noqa: E402
 from song.render import _render_kernel as kernel  # noqa: E402
+from song.render.render import tile_lists  # noqa: E402
 from song.runtime.robot import Pose  # noqa: E402
 from song.runtime.vision import SceneView  # noqa: E402
 
@@ -100,8 +101,8 @@ def main() -> None:
         view.reset(episode)
         pose = Pose(float(episode.start_xy[0]), float(episode.start_xy[1]), float(episode.start_yaw))
         _, sets, camera = view.request(pose, 1.0, width, height)
-        profile: dict = {}
-        offsets, ids, attr, tiles_x, tiles_y, order, rect = render_module_stages(sets, camera, profile)
+        lists = tile_lists([(sets, camera)])
+        offsets, ids, attr, tiles_x, tiles_y = lists.offsets, lists.ids, lists.attr, lists.tiles_x, lists.tiles_y
         counts = np.zeros((tiles_x * tiles_y, len(NAMES)), np.int64)
         rgb = np.empty((1, height, width, 3), np.float32)
         depth = np.empty((1, height, width), np.float32)
@@ -112,7 +113,7 @@ def main() -> None:
         rows.append({"episode": summary.episode_id, **{n: round(float(v), 2) for n, v in zip(NAMES, per_pixel, strict=True)},
                      "pixels_stopped_at_1e-4": round(float((t <= kernel.T_MIN * 1.0001).mean()), 4),
                      "median_final_T": float(np.median(t)), "tile_list_entries_per_pixel": round(len(ids) / (width * height), 2),
-                     "oracle_cull": oracle_cull(attr, order, rect, depth[0], alpha[0], rgb[0], (width, height, tiles_x, tiles_y))})  # fmt: skip
+                     "oracle_cull": oracle_cull(attr, lists.order, lists.rect, depth[0], alpha[0], rgb[0], (width, height, tiles_x, tiles_y))})  # fmt: skip
     emit({"resolution": args.resolution, "views": rows, "one_surface_model": one_surface()})
 
 
@@ -154,33 +155,6 @@ def oracle_cull(attr, order, rect, depth, alpha, rgb, size) -> dict:
             "rgb_mean_abs_change_255": round(float(np.abs(kept_rgb - full_rgb).mean() * 255), 3),
             "rgb_max_abs_change_255": round(float(np.abs(kept_rgb - full_rgb).max() * 255), 2),
             "depth_median_abs_change_m": float(np.median(np.abs(kept_depth - full_depth)[covered]))}  # fmt: skip
-
-
-def render_module_stages(sets, camera, profile):
-    """Projection, sort and binning of one view exactly as :func:`song.render.render` does them."""
-    from song.render.render import EPS2D, visible_chunks
-
-    selections = [(s, visible_chunks(s, camera)) for s in sets if len(s)]
-    total = sum(len(sel) for _, sel in selections)
-    attr = np.empty((total, kernel.N_ATTR), np.float32)
-    depth = np.empty(total)
-    rect = np.empty((total, 4), np.int64)
-    valid = np.zeros(total, np.bool_)
-    offset = 0
-    for s, sel in selections:
-        kernel.project_kernel(
-            s.means, s.quats, s.scales, s.opacities, s.log_alpha_range(), s.sh, s.sh_degree, sel,
-            np.ascontiguousarray(camera.rotation, np.float64), np.ascontiguousarray(camera.translation, np.float64),
-            np.ascontiguousarray(camera.position, np.float64), float(camera.fx), float(camera.fy), float(camera.cx),
-            float(camera.cy), int(camera.width), int(camera.height), float(camera.near), float(camera.far), EPS2D,
-            offset, 0, attr, depth, rect, valid,
-        )  # fmt: skip
-        offset += len(sel)
-    order = kernel.depth_order(np.flatnonzero(valid), depth)
-    tiles_x = (camera.width + kernel.TILE - 1) // kernel.TILE
-    tiles_y = (camera.height + kernel.TILE - 1) // kernel.TILE
-    offsets, ids = kernel.bin_kernel(order, rect, tiles_x, tiles_y, 8)
-    return offsets, ids, attr, tiles_x, tiles_y, order, rect
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -73,23 +74,30 @@ def _render_numba(
     return _render_numba_views([(sets, camera)], background, profile)[0]
 
 
-def _render_numba_views(
-    views: Sequence[tuple[Sequence[GaussianSet], Camera]],
-    background: np.ndarray,
-    profile: dict[str, float] | None = None,
-) -> list[RenderOutput]:
-    """Several views (each its Gaussian sets and camera; one size), each image equal to that view alone.
+@dataclass
+class TileLists:
+    """Projected Gaussians of one or several views, binned front to back per 16×16 tile.
 
-    One projection buffer, one binning and one parallel compositing loop over every camera's tiles.
+    ``attr`` (N, N_ATTR) projected rows; ``order`` the visible rows by depth, view after view; ``rect``
+    (N, 4) tile rectangles (view b's tile rows offset by b·tiles_y); ``offsets``/``ids`` the tile lists.
     """
-    clock = [time.perf_counter()]
 
-    def lap(name: str) -> None:
-        if profile is not None:
-            now = time.perf_counter()
-            profile[name] = profile.get(name, 0.0) + now - clock[0]
-            clock[0] = now
+    attr: np.ndarray
+    order: np.ndarray
+    rect: np.ndarray
+    offsets: np.ndarray
+    ids: np.ndarray
+    width: int
+    height: int
+    tiles_x: int
+    tiles_y: int
 
+
+def tile_lists(views: Sequence[tuple[Sequence[GaussianSet], Camera]], lap=lambda name: None) -> TileLists:
+    """Cull, project, sort and bin several views of one size (the numba backend's steps before compositing).
+
+    ``lap(name)`` is called after each phase (``cull``, ``project``, ``sort``, ``bin``).
+    """
     camera0 = views[0][1]
     width, height = int(camera0.width), int(camera0.height)
     tiles_x = (width + kernel.TILE - 1) // kernel.TILE
@@ -126,11 +134,32 @@ def _render_numba_views(
     lap("sort")
     offsets, ids = kernel.bin_kernel(order, rect, tiles_x, tiles_y * len(views), BIN_PARTS)
     lap("bin")
-    out_rgb = np.empty((len(views), height, width, 3), dtype=np.float32)
-    out_depth = np.empty((len(views), height, width), dtype=np.float32)
-    out_alpha = np.empty((len(views), height, width), dtype=np.float32)
-    kernel.composite_kernel(offsets, ids, attr, width, height, tiles_x, tiles_y, background, out_rgb, out_depth,
-                            out_alpha)  # fmt: skip
+    return TileLists(attr, order, rect, offsets, ids, width, height, tiles_x, tiles_y)
+
+
+def _render_numba_views(
+    views: Sequence[tuple[Sequence[GaussianSet], Camera]],
+    background: np.ndarray,
+    profile: dict[str, float] | None = None,
+) -> list[RenderOutput]:
+    """Several views (each its Gaussian sets and camera; one size), each image equal to that view alone.
+
+    One projection buffer, one binning and one parallel compositing loop over every camera's tiles.
+    """
+    clock = [time.perf_counter()]
+
+    def lap(name: str) -> None:
+        if profile is not None:
+            now = time.perf_counter()
+            profile[name] = profile.get(name, 0.0) + now - clock[0]
+            clock[0] = now
+
+    t = tile_lists(views, lap)
+    out_rgb = np.empty((len(views), t.height, t.width, 3), dtype=np.float32)
+    out_depth = np.empty((len(views), t.height, t.width), dtype=np.float32)
+    out_alpha = np.empty((len(views), t.height, t.width), dtype=np.float32)
+    kernel.composite_kernel(t.offsets, t.ids, t.attr, t.width, t.height, t.tiles_x, t.tiles_y, background, out_rgb,
+                            out_depth, out_alpha)  # fmt: skip
     lap("composite")
     return [RenderOutput(to_uint8(out_rgb[b]), out_depth[b], out_alpha[b], out_rgb[b]) for b in range(len(views))]
 
