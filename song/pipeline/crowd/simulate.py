@@ -618,7 +618,8 @@ def _outcome(w: _Walkers, k: int, cfg: CrowdConfig, shift: float) -> dict:
             f"stalled for {cfg.stall_time_s:g} s after replanning ({w.replanned[k]}) at "
             f"{w.gave_up[k] - shift:.1f} s; it stepped out of the way and stands there"
         )
-        return {"status": "gave_up", "reason": reason, "arrival_s": None, "skipped_stops": w.skipped[k]}
+        return {"status": "gave_up", "reason": reason, "arrival_s": None, "skipped_stops": w.skipped[k],
+                "gave_up_s": round(float(w.gave_up[k]) - shift, 4)}  # fmt: skip
     if not np.isnan(w.arrival[k]):  # it finished its routine (it may be stepping aside for someone now)
         return {"status": "arrived", "reason": "", "arrival_s": round(float(w.arrival[k]) - shift, 4),
                 "skipped_stops": w.skipped[k]}  # fmt: skip

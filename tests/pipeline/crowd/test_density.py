@@ -56,7 +56,7 @@ def test_a_walker_stalled_for_good_on_its_last_leg_gives_up_and_stands_out_of_th
     t = np.arange(plan.xy.shape[1]) / plan.fps
     for k in gave_up:
         info, row = plan.status[k], list(plan.ped_ids).index(k)
-        when = float(info["reason"].split(" at ")[1].split(" s;")[0])
+        when = info["gave_up_s"]
         assert "stepped out of the way" in info["reason"] and info["arrival_s"] is None
         assert np.linalg.norm(plan.xy[row, -1] - np.array(intents[k].goal_xy)) > 0.5  # not at its goal
         after = plan.xy[row, t >= when]
