@@ -9,7 +9,7 @@ BENCH ?= runs/demo-bench
 SAMPLES ?= datasets/sample_scenes
 SCENES ?= runs/scenes
 
-.PHONY: setup demo test test-lerobot lerobot-env api lint format bench clean
+.PHONY: setup demo test test-lerobot test-people lerobot-env api lint format bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -78,6 +78,12 @@ lerobot-env: $(LEROBOT_ENV)/.installed-stamp
 
 test-lerobot: setup lerobot-env
 	SONG_LEROBOT_PYTHON=$(LEROBOT_ENV)/bin/python $(VENV)/bin/pytest -q tests/runtime/test_lerobot.py
+
+# Detectors trained on real photos judge the avatars (tests/datasets/avatars/test_real_photo_detectors.py):
+# MediaPipe 0.10.21 and OpenCV in benchmarks/people.py's own environment, built by that benchmark's installer
+test-people: setup
+	$(PY) -c "from benchmarks.people import ensure_detectors; ensure_detectors()"
+	SONG_PEOPLE_PYTHON=build/bench-envs/people/bin/python $(VENV)/bin/pytest -q tests/datasets/avatars/test_real_photo_detectors.py
 
 # the API reference, generated from the docstrings (a warning, e.g. a module that fails to import, fails it)
 api: setup

@@ -188,6 +188,70 @@ def _project(camera, points: np.ndarray) -> np.ndarray:
     )
 
 
+def _frame_record(camera, joints, mask, distance: float, kind: str, name: str) -> dict:
+    """A frame's ground truth: the person's box, projected joints, head and the two crops."""
+    from song.geometry.skeleton import JOINT_INDEX
+
+    box = _box(mask)
+    px = _project(camera, joints)
+    head_px = px[JOINT_INDEX["head"]]
+    side = int(1.25 * (box[3] - box[1]))
+    cx, cy = (box[0] + box[2]) // 2, (box[1] + box[3]) // 2
+    face_side = int(camera.fx * FACE_CROP_M / distance)
+    return {
+        "file": name,
+        "kind": kind,
+        "distance_m": round(distance, 3),
+        "focal_px": camera.fx,
+        "box": box,
+        "joints_px": {joint: px[i].round(2).tolist() for joint, i in JOINT_INDEX.items()},
+        "head_px": head_px.round(2).tolist(),
+        "person_crop": [cx - side // 2, cy - side // 2, side],
+        "face_crop": [int(head_px[0]) - face_side // 2, int(head_px[1]) - face_side // 2, face_side],
+    }
+
+
+def portrait(asset, distance: float, facing_deg: float, kind: str, out: Path, index: int) -> dict:
+    """One identity mid-stride (the procedural gait) in front of a plain wall colour, seen as a ``face`` /
+    ``back`` frame (camera at the head joint's height) or a ``body`` frame (the robot camera); writes
+    ``frame_NNNN.png`` and ``mask_NNNN.png`` into ``out`` and returns the frame's record."""
+    import cv2
+
+    from song.datasets.avatars.cache import skin_asset
+    from song.geometry.fk import forward_kinematics, skinning_transforms
+    from song.geometry.lbs import lbs_positions, lbs_rotations
+    from song.geometry.skeleton import JOINT_INDEX
+    from song.render import GaussianSet, look_at, render
+    from song.viz.avatar import walk_motion
+
+    motion, frame = walk_motion(), 60
+    scale = asset.height_m / float(motion.height_m)
+    rest = asset.rest_joints.astype(np.float64)
+    transforms = skinning_transforms(rest, motion.local_quats[frame], motion.root_pos[frame] * scale)
+    skin = skin_asset(asset)
+    g = asset.gaussians
+    posed = GaussianSet.from_raw(
+        lbs_positions(skin, transforms.astype(np.float32)),
+        lbs_rotations(skin, transforms.astype(np.float32)),
+        g.log_scales,
+        g.opacity_logits,
+        g.sh_dc,
+    )
+    joints, rots = forward_kinematics(rest, motion.local_quats[frame], motion.root_pos[frame] * scale)
+    forward = rots[JOINT_INDEX["pelvis"]] @ np.array([1.0, 0.0, 0.0])
+    angle = math.atan2(forward[1], forward[0]) + math.radians(facing_deg)
+    root = joints[JOINT_INDEX["pelvis"], :2]
+    height = ROBOT_CAMERA_M if kind == "body" else float(joints[JOINT_INDEX["head"], 2])
+    eye = np.array([*(root + distance * np.array([math.cos(angle), math.sin(angle)])), height])
+    camera = look_at(eye, np.array([root[0], root[1], height]), WIDTH, HEIGHT, HFOV)
+    frame_out = render([posed], camera, "numba", background=(0.62, 0.58, 0.52))
+    name = f"frame_{index:04d}.png"
+    cv2.imwrite(str(out / name), cv2.cvtColor(frame_out.rgb, cv2.COLOR_RGB2BGR))
+    mask = frame_out.alpha > 0.5
+    cv2.imwrite(str(out / f"mask_{index:04d}.png"), mask.astype(np.uint8) * 255)
+    return _frame_record(camera, joints, mask, distance, kind, name)
+
+
 def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: int) -> list[dict]:
     """Render the ``body`` and ``face`` frames into ``out`` (PNG + our masks) and return their records."""
     import cv2
@@ -249,32 +313,18 @@ def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: i
             hidden = (full.depth[mask] < alone.depth[mask] - 0.2).mean()
             if hidden > 0.05:
                 continue
-            box = _box(mask)
-            px = _project(camera, joints)
-            head_px = px[JOINT_INDEX["head"]]
-            box_h = box[3] - box[1]
-            side = int(1.25 * box_h)
-            cx, cy = (box[0] + box[2]) // 2, (box[1] + box[3]) // 2
-            face_side = int(camera.fx * FACE_CROP_M / d)
             index = len(frames)
             name = f"frame_{index:04d}.png"
             cv2.imwrite(str(out / name), cv2.cvtColor(full.rgb, cv2.COLOR_RGB2BGR))
             cv2.imwrite(str(out / f"mask_{index:04d}.png"), mask.astype(np.uint8) * 255)
+            record = _frame_record(camera, joints, mask, d, kind, name)
             frames.append(
                 {
-                    "file": name,
-                    "kind": kind,
+                    **record,
                     "episode": episode.episode_id,
                     "pedestrian": k,
                     "t": round(t, 3),
-                    "distance_m": round(d, 3),
                     "facing_deg": round(math.degrees(phi), 1),
-                    "focal_px": camera.fx,
-                    "box": box,
-                    "joints_px": {name: px[i].round(2).tolist() for name, i in JOINT_INDEX.items()},
-                    "head_px": head_px.round(2).tolist(),
-                    "person_crop": [cx - side // 2, cy - side // 2, side],
-                    "face_crop": [int(head_px[0]) - face_side // 2, int(head_px[1]) - face_side // 2, face_side],
                 }
             )
             made += 1

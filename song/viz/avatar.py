@@ -7,6 +7,7 @@ picture shows identities in the rest pose and, when a pose function is given, mi
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -73,18 +74,26 @@ def draw_avatars(
     return Path(out)
 
 
-def mid_stride(asset: AvatarAsset) -> np.ndarray:
-    """The asset's Gaussian means mid-stride: procedural gait walking at 1.2 m/s, posed by LBS."""
+@functools.cache
+def walk_motion():
+    """Three seconds of the procedural gait walking straight at 1.2 m/s (a :class:`Motion`, computed once)."""
     from song.config import MotionConfig
-    from song.datasets.avatars.cache import skin_asset
-    from song.geometry.fk import skinning_transforms
-    from song.geometry.lbs import lbs_positions
     from song.pipeline.motion import synthesize_motions
     from song.pipeline.motion.synthetic import trajectory_from_profiles
 
     frames = 90
     walk = trajectory_from_profiles(0, np.full(frames, 1.2), np.zeros(frames))
     [(motion, _)] = synthesize_motions([walk], [""], [0], MotionConfig(generator="procedural"))
+    return motion
+
+
+def mid_stride(asset: AvatarAsset) -> np.ndarray:
+    """The asset's Gaussian means mid-stride: procedural gait walking at 1.2 m/s, posed by LBS."""
+    from song.datasets.avatars.cache import skin_asset
+    from song.geometry.fk import skinning_transforms
+    from song.geometry.lbs import lbs_positions
+
+    motion = walk_motion()
     scale = asset.height_m / float(motion.height_m)
     rest = asset.rest_joints.astype(np.float64)
     f = int(np.argmax(np.abs(motion.joints[:, 7, 0] - motion.joints[:, 8, 0])[30:])) + 30  # feet furthest apart

@@ -38,7 +38,7 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import N_JOINTS, rest_joints
 from song.util import derive_rng
 
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 SKIN_TONES = np.array(  # sRGB 0–1, light to deep (a spread of real skin reflectances)
     [
         [0.96, 0.84, 0.74],
@@ -356,6 +356,29 @@ def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.cross(axis, depth), depth
 
 
+def _sphere_lattice(n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` evenly spread unit vectors: a Fibonacci lattice turned by a random rotation.
+
+    Evenly spread rather than independent: discs placed independently leave gaps (a Poisson process
+    covers a surface unevenly) through which the inside of the head and hair shows as dark cracks.
+    """
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    phi = i * np.pi * (3.0 - np.sqrt(5.0))
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, 1.0))
+    lattice = np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
+    q, upper = np.linalg.qr(rng.normal(size=(3, 3)))
+    return lattice @ (q * np.sign(np.diag(upper))).T
+
+
+def _plane_lattice(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` evenly spread points of the unit square (the R2 sequence from a random start), as two arrays."""
+    g = 1.32471795724474602596  # the plastic number: R2's generator
+    i = np.arange(1, n + 1)[:, None]
+    points = (rng.random(2) + i * np.array([1.0 / g, 1.0 / g**2])) % 1.0
+    return points[:, 0], points[:, 1]
+
+
 def _sample(part: _Part, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``n`` points on the part's surface.
 
@@ -363,8 +386,7 @@ def _sample(part: _Part, n: int, rng: np.random.Generator) -> tuple[np.ndarray, 
     unit-sphere point for ellipsoids; the angle around a tube as (cos, sin, 0)).
     """
     if part.end is None:
-        v = rng.normal(size=(n, 3))
-        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        v = _sphere_lattice(n, rng)
         radii = np.asarray(part.radii)
         normal = v / radii
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
@@ -373,8 +395,8 @@ def _sample(part: _Part, n: int, rng: np.random.Generator) -> tuple[np.ndarray, 
     length = float(np.linalg.norm(axis))
     unit = axis / length
     width, depth = _frame(unit)
-    t = rng.random(n)
-    phi = rng.random(n) * 2 * np.pi
+    t, phi = _plane_lattice(n, rng)
+    phi = phi * 2 * np.pi
     r = part.radii[0] + t * (part.radii[1] - part.radii[0])
     c, s = np.cos(phi)[:, None], np.sin(phi)[:, None]
     offset = r[:, None] * (c * width + part.radii[2] * s * depth)
@@ -400,19 +422,38 @@ def _ellipse(v: np.ndarray, cy: float, cz: float, ry: float, rz: float) -> np.nd
     return (v[:, 0] > 0.45) & (((v[:, 1] - cy) / ry) ** 2 + ((v[:, 2] - cz) / rz) ** 2 < 1.0)
 
 
+def _soft(v: np.ndarray, cy: float, cz: float, ry: float, rz: float) -> np.ndarray:
+    """A smooth bump on the head's front: 1 at (cy, cz), falling off as a Gaussian of radii (ry, rz)."""
+    return (v[:, 0] > 0.3) * np.exp(-(((v[:, 1] - cy) / ry) ** 2 + ((v[:, 2] - cz) / rz) ** 2))
+
+
 def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray) -> None:
-    """Eyes (sclera, iris), brows, lips and cheeks on the head's front (``v``: unit directions, x forward)."""
+    """A face on the head's front (``v``: unit directions, x forward).
+
+    First the shading a face's relief gets under light from above (eye sockets under the brow ridge, the
+    sides of the nose, under the nose and the lower lip), then eyes (sclera, iris, pupil, the upper lid's
+    lash line), brows, lips and cheeks.
+    """
     skin = np.array(p.skin)
+    ez = _EYE_DIR[2]
+    shade = 1.0 - 0.42 * (_soft(v, _EYE_DIR[1], ez - 0.01, 0.17, 0.1) + _soft(v, -_EYE_DIR[1], ez - 0.01, 0.17, 0.1))
+    shade -= 0.22 * (_soft(v, 0.11, -0.1, 0.05, 0.12) + _soft(v, -0.11, -0.1, 0.05, 0.12))  # beside the nose
+    shade -= 0.25 * _soft(v, 0.0, -0.22, 0.09, 0.035) + 0.2 * _soft(v, 0.0, -0.43, 0.14, 0.04)  # under nose, lip
+    shade += 0.06 * _soft(v, 0.0, ez + 0.02, 0.06, 0.2)  # the bridge of the nose catches the light
+    dark = 1.0 - np.clip(shade, 0.45, 1.1)[:, None]
+    out *= 1.0 - dark * [0.85, 1.0, 1.05]  # shadow on skin is warm: red light scatters under it
     for side in (1.0, -1.0):
-        ey, ez = side * _EYE_DIR[1], _EYE_DIR[2]
-        out[_ellipse(v, ey, ez, 0.12, 0.055)] = [0.92, 0.9, 0.86]
-        out[_ellipse(v, ey, ez, 0.05, 0.05)] = p.eye_colour
-        out[_ellipse(v, ey, ez, 0.02, 0.02)] = [0.03, 0.03, 0.03]
-        out[_ellipse(v, side * 0.34, ez + 0.13, 0.14, 0.028)] = np.array(p.hair_colour) * 0.8
+        ey = side * _EYE_DIR[1]
+        out[_ellipse(v, ey, ez, 0.11, 0.045)] = [0.78, 0.75, 0.72]
+        out[_ellipse(v, ey, ez, 0.055, 0.045)] = np.array(p.eye_colour) * 0.7
+        out[_ellipse(v, ey, ez, 0.025, 0.025)] = [0.03, 0.03, 0.03]
+        out[_ellipse(v, ey, ez + 0.04, 0.12, 0.016)] = [0.1, 0.07, 0.06]  # the lash line
+        brow = np.array(p.hair_colour) * 0.6 if np.mean(p.hair_colour) < 0.6 else skin * 0.55
+        out[_ellipse(v, side * 0.35, ez + 0.13, 0.15, 0.034)] = brow
         cheek = _ellipse(v, side * 0.42, -0.12, 0.14, 0.1)
         out[cheek] = out[cheek] * [1.02, 0.95, 0.94]
-    out[_ellipse(v, 0.0, -0.33, 0.2, 0.035)] = skin * [0.82, 0.55, 0.55]
-    out[_ellipse(v, 0.0, -0.295, 0.17, 0.012)] = skin * [0.55, 0.35, 0.35]  # the line between the lips
+    out[_ellipse(v, 0.0, -0.33, 0.19, 0.04)] = skin * [0.7, 0.45, 0.45]
+    out[_ellipse(v, 0.0, -0.31, 0.18, 0.013)] = skin * [0.4, 0.25, 0.25]  # the line between the lips
 
 
 def _fabric(kind: str, points: np.ndarray, around: np.ndarray) -> np.ndarray:
@@ -613,19 +654,66 @@ def _split(weights: np.ndarray, total: int) -> np.ndarray:
     return counts
 
 
+def _inside(part: _Part, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which points lie inside a part's volume, and their unit directions from its centre (ellipsoids)."""
+    if part.end is None:
+        u = (points - part.start) / np.asarray(part.radii)
+        r = np.linalg.norm(u, axis=1)
+        return r < 1.0, u / np.maximum(r, 1e-9)[:, None]
+    axis = part.end - part.start
+    length = float(np.linalg.norm(axis))
+    width, depth = _frame(axis / length)
+    rel = points - part.start
+    t = rel @ axis / length**2
+    r = part.radii[0] + np.clip(t, 0.0, 1.0) * (part.radii[1] - part.radii[0])
+    across = ((rel @ width) / r) ** 2 + ((rel @ depth) / (r * part.radii[2])) ** 2
+    return (t >= 0.0) & (t <= 1.0) & (across < 1.0), rel
+
+
+def _layer_colours(p: AvatarParams, parts: list[_Part], regions: np.ndarray, means: np.ndarray, colours) -> None:
+    """Where layers interpenetrate, a surfel takes the colour of what covers it (in place).
+
+    What the hair covers (the scalp, the neck under long hair) takes the hair's colour in its shade, and a
+    hair surfel inside the body (long hair reaching into the shoulders) the colour of the nearest body
+    surfel: a surfel showing through a gap between the covering surfels then reads as the layer on top,
+    not as a speckle of skin in the hair or of hair on a shirt.
+    """
+    from scipy.spatial import cKDTree
+
+    hair = regions == "hair"
+    if not hair.any():
+        return
+    covered = np.zeros(len(means), bool)
+    for part in parts:
+        if part.region == "hair":
+            inside, direction = _inside(part, means)
+            if part.end is None:
+                inside &= _hair_mask(p, direction)
+            covered |= inside & ~hair
+    sunk = np.zeros(len(means), bool)
+    for part in parts:
+        if part.region not in ("hair", "head", "nose", "ear"):
+            sunk |= _inside(part, means)[0] & hair
+    colours[covered] = np.array(p.hair_colour) * 0.8
+    if sunk.any():
+        body = np.flatnonzero(~hair)
+        colours[sunk] = colours[body[cKDTree(means[body]).query(means[sunk])[1]]]
+
+
 def _sample_part(p: AvatarParams, part: _Part, count: int, rng: np.random.Generator):
     """``count`` surface points of a part; the hair shell keeps only its styled region (oversampled)."""
     if part.name != "hair":
         return _sample(part, count, rng)
-    got = [[], [], [], []]
-    kept = 0
-    while kept < count:
-        pts, nrm, t, v = _sample(part, 3 * count, rng)
-        keep = _hair_mask(p, v)
-        for store, arr in zip(got, (pts, nrm, t, v), strict=True):
-            store.append(arr[keep])
-        kept += int(keep.sum())
-    return tuple(np.concatenate(a)[:count] for a in got)
+    share = float(_hair_mask(p, _sphere_lattice(4096, rng)).mean())  # the styled share of the shell
+    n = int(np.ceil(count / max(share, 1e-3) * 1.03))
+    while True:  # one even lattice over the whole shell whose styled region holds ≥ count points
+        pts, nrm, t, v = _sample(part, n, rng)
+        kept = np.flatnonzero(_hair_mask(p, v))
+        if len(kept) >= count:
+            break
+        n = int(np.ceil(n * 1.05))
+    kept = np.sort(rng.choice(kept, count, replace=False))  # drops the few percent over
+    return pts[kept], nrm[kept], t[kept], v[kept]
 
 
 def generate_avatar(
@@ -647,7 +735,9 @@ def generate_avatar(
         colours.append(_colours(p, part, points, normal, t, v))
         spacing.append(np.full(len(points), np.sqrt(area / max(int(count), 1))))
         hanging.append(np.full(len(points), part.region in ("skirt", "bag")))
+    regions = np.concatenate([np.full(int(count), part.region) for part, count in zip(parts, counts, strict=True)])
     means, normals, colours, spacing, hanging = map(np.concatenate, (means, normals, colours, spacing, hanging))
+    _layer_colours(p, parts, regions, means, colours)
     means[:, 2] -= means[:, 2].min()  # soles on z = 0
     colours = _shade(colours, normals, means, p.height_m)
     colours = np.clip(colours * rng.uniform(0.975, 1.025, (len(colours), 1)), 0.0, 1.0)  # fine grain

@@ -1,0 +1,99 @@
+"""Detectors trained on real photos judge our avatars: ``benchmarks/people.py``'s figures and its judges.
+
+The scoring is checked on hand-made detections (always). The judges themselves (MediaPipe 0.10.21 and
+OpenCV, in the benchmark's own environment, which ``make test-people`` builds with the benchmark's own
+installer) run on rendered avatars when that environment exists; the test skips with the reason
+otherwise, and fails under ``make test-people``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks import people
+from song.datasets.avatars.generate import generate_avatar
+
+ROOT = Path(__file__).resolve().parents[3]
+PEOPLE_PYTHON = Path(os.environ.get("SONG_PEOPLE_PYTHON", people.ENV / "bin" / "python"))
+
+
+def _body_frame(d: float) -> dict:
+    joints = {joint: [150.0, 100.0 + 25.0 * k] for k, joint in enumerate(people.LIMBS.values())}
+    return {
+        "kind": "body",
+        "distance_m": d,
+        "focal_px": 500.0,
+        "box": [100, 100, 200, 400],
+        "joints_px": joints,
+        "head_px": [150.0, 110.0],
+        "person_crop": [0, 100, 300],
+    }
+
+
+def test_figures_are_computed_from_the_raw_detections() -> None:
+    near, far = _body_frame(3.0), _body_frame(5.0)
+    landmarks = [[0.0, 0.0, 1.0]] * 33
+    for index, joint in people.LIMBS.items():
+        x, y = near["joints_px"][joint]
+        landmarks[index] = [x, y + (60.0 if index in (27, 28) else 0.0), 1.0]  # ankles 0.2 box heights off
+    face = {"kind": "face", "distance_m": 1.5, "focal_px": 500.0, "head_px": [400.0, 200.0]}
+    back = {**face, "kind": "back", "distance_m": 1.8}
+    tolerance = 500.0 * people.FACE_TOLERANCE_M / 1.5  # 40 px at 1.5 m
+    detections = [
+        {"pose": landmarks, "pose_crop": None, "hog": [[100, 100, 100, 300, 1.0]], "face_short": [], "haar": []},
+        {"pose": None, "pose_crop": landmarks, "hog": [[500, 100, 100, 300, 1.0]], "face_short": [], "haar": []},
+        {"face_short": [[380.0, 180.0, 40.0, 40.0, 0.9]], "haar": [[392 + int(tolerance), 190, 20, 20]]},
+        {"face_short": [[380.0, 180.0, 40.0, 40.0, 0.9]], "haar": [[300, 150, 40, 40]]},
+    ]
+    ours = np.zeros((540, 960), bool)
+    ours[100:400, 100:200] = True
+    theirs = np.zeros_like(ours)
+    theirs[100:400, 100:150] = True
+    empty = np.zeros_like(ours)
+    figures = people.score([near, far, face, back], detections, [ours, ours, empty, empty], [theirs, theirs] + [empty] * 2)
+    assert figures["blazepose_frame"]["found"] == {"n": 2, "hits": 1, "share": 0.5}
+    assert figures["blazepose_frame"]["keypoints_within_10pct"] == {"n": 12, "hits": 10, "share": 0.833}
+    assert figures["blazepose_crop"]["found"]["hits"] == 1  # the far frame's crop; its joints are the near one's
+    assert figures["hog_2_8m"] == {"n": 2, "hits": 1, "share": 0.5}
+    assert figures["segmentation_iou_2_4m"] == {"n": 1, "median": 0.5, "p10": 0.5}
+    assert figures["face_mediapipe_short_1_2m"]["hits"] == 1
+    assert figures["face_haar_1p5_2p5m"]["hits"] == 0  # its centre lies just beyond the 0.12 m tolerance
+    assert figures["face_from_behind_mediapipe_1_2m"] == {"n": 1, "hits": 1, "share": 1.0}  # a false alarm
+
+
+def _detectors_ready() -> str | None:
+    if not PEOPLE_PYTHON.exists():
+        return f"no detector environment at {PEOPLE_PYTHON} (make test-people builds it; .ci/run does)"
+    probe = subprocess.run([str(PEOPLE_PYTHON), "-c", "import mediapipe, cv2"], capture_output=True)
+    return None if probe.returncode == 0 else f"mediapipe does not import in {PEOPLE_PYTHON}"
+
+
+def test_real_photo_detectors_find_an_avatar_and_not_the_back_of_its_head(tmp_path: Path) -> None:
+    reason = _detectors_ready()
+    if reason and "SONG_PEOPLE_PYTHON" in os.environ:  # make test-people: the judges must be there
+        pytest.fail(reason)
+    if reason:
+        pytest.skip(reason)
+    asset = generate_avatar(np.random.default_rng(1003), "judged")
+    frames = [
+        people.portrait(asset, 1.6, 5.0, "face", tmp_path, 0),
+        people.portrait(asset, 1.6, 180.0, "back", tmp_path, 1),
+        people.portrait(asset, 3.5, -20.0, "body", tmp_path, 2),
+    ]
+    (tmp_path / "frames.json").write_text(json.dumps(frames))
+    subprocess.run([str(PEOPLE_PYTHON), str(ROOT / "benchmarks" / "_people_detect.py"), str(tmp_path)], check=True)
+    detections = json.loads((tmp_path / "detections.json").read_text())
+    face, back, body = detections
+    assert people._face_hit(face["face_short"], frames[0]) and people._face_hit(face["haar"], frames[0])
+    assert not people._face_hit(back["face_short"], frames[1]) and not people._face_hit(back["haar"], frames[1])
+    masks = [np.zeros((people.HEIGHT, people.WIDTH), bool)] * 3
+    figures = people.score(frames, detections, masks, masks)
+    assert figures["blazepose_crop"]["found"]["share"] == 1.0
+    assert figures["blazepose_crop"]["keypoints_within_10pct"]["share"] >= 0.8
+    assert figures["hog_2_8m"]["share"] == 1.0
