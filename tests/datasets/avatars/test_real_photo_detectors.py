@@ -56,7 +56,9 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
     theirs = np.zeros_like(ours)
     theirs[100:400, 100:150] = True
     empty = np.zeros_like(ours)
-    figures = people.score([near, far, face, back], detections, [ours, ours, empty, empty], [theirs, theirs] + [empty] * 2)
+    figures = people.score(
+        [near, far, face, back], detections, [ours, ours, empty, empty], [theirs, theirs] + [empty] * 2
+    )
     assert figures["blazepose_frame"]["found"] == {"n": 2, "hits": 1, "share": 0.5}
     assert figures["blazepose_frame"]["keypoints_within_10pct"] == {"n": 12, "hits": 10, "share": 0.833}
     assert figures["blazepose_crop"]["found"]["hits"] == 1  # the far frame's crop; its joints are the near one's
