@@ -147,7 +147,9 @@ def test_rendered_depth_matches_the_proxy(office: Path) -> None:
     grid = load_scene_package(office).occupancy
     gaussians = scene_gaussians(office / GAUSSIANS)
     meshes = read_usd_proxy(office / USD_PROXY) + read_usd_surfaces(office / USD_PROXY)
-    errors, covered, seen = [], 0, 0
+    from scipy.ndimage import binary_dilation
+
+    errors, inside, covered, seen = [], [], 0, 0
     for x, y, yaw in _poses(grid, 50, 0.3, seed=0):
         camera = robot_camera(x, y, yaw, CAMERA_HEIGHT_M, HFOV_DEG, 320, 240)
         out = render(gaussians, camera)
@@ -156,10 +158,19 @@ def test_rendered_depth_matches_the_proxy(office: Path) -> None:
         hit = surface & (out.alpha > 0.5)
         seen, covered = seen + surface.sum(), covered + hit.sum()
         errors.append(np.abs(out.depth[hit] - truth[hit]))
-    errors = np.concatenate(errors)
+        # alpha blending mixes the depths of both sides of a silhouette: away from depth steps the
+        # surfaces themselves must be where the proxy says
+        t = np.where(surface, truth, 100.0)
+        step = np.zeros(t.shape, bool)
+        step[:, 1:] |= np.abs(np.diff(t, axis=1)) > 0.1
+        step[1:, :] |= np.abs(np.diff(t, axis=0)) > 0.1
+        away = hit & ~binary_dilation(step, iterations=2)
+        inside.append(np.abs(out.depth[away] - truth[away]))
+    errors, inside = np.concatenate(errors), np.concatenate(inside)
     assert covered / seen >= 0.98, covered / seen
     assert np.median(errors) <= 0.03, np.median(errors)
-    assert np.percentile(errors, 95) <= 0.10, np.percentile(errors, 95)
+    assert np.percentile(inside, 95) <= 0.06, np.percentile(inside, 95)
+    assert np.percentile(errors, 95) <= 0.15, np.percentile(errors, 95)  # silhouettes included
 
 
 def test_no_holes_from_30_cm(office: Path) -> None:

@@ -93,4 +93,4 @@ def test_lobby_with_few_objects_reaches_the_configured_density(tmp_path: Path) -
     assert len(intents) == pedestrian_count(walk.area_m2, config) == config.intents.max_pedestrians
     standing = np.array([i.start_xy for i in intents] + [i.goal_xy for i in intents])
     gaps = np.linalg.norm(standing[:, None] - standing[None], axis=-1) + np.eye(len(standing)) * 9
-    assert gaps.min() >= config.intents.min_spawn_separation_m  # nobody waits on another's spot
+    assert gaps.min() >= config.intents.min_spawn_separation_m - 1e-9  # nobody waits on another's spot (to rounding)
