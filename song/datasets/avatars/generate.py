@@ -442,6 +442,11 @@ def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray) -> None:
     shade += 0.06 * _soft(v, 0.0, ez + 0.02, 0.06, 0.2)  # the bridge of the nose catches the light
     dark = 1.0 - np.clip(shade, 0.45, 1.1)[:, None]
     out *= 1.0 - dark * [0.85, 1.0, 1.05]  # shadow on skin is warm: red light scatters under it
+    # the sheen of skin where the face turns to the light (forehead, nose bridge, cheekbones): what gives
+    # a dark face its contrast, as shadow does a fair one
+    sheen = _soft(v, 0.0, 0.42, 0.3, 0.1) + _soft(v, 0.0, ez - 0.02, 0.05, 0.12)
+    sheen = sheen + _soft(v, 0.36, -0.06, 0.1, 0.06) + _soft(v, -0.36, -0.06, 0.1, 0.06)
+    out += (0.35 * np.clip(sheen, 0.0, 1.0))[:, None] * (1.0 - out) * (1.0 - np.mean(skin))
     for side in (1.0, -1.0):
         ey = side * _EYE_DIR[1]
         out[_ellipse(v, ey, ez, 0.11, 0.045)] = [0.78, 0.75, 0.72]
