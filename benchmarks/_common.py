@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import resource
+import subprocess
 import sys
 import time
 from contextlib import contextmanager
@@ -61,3 +62,17 @@ def crowd_outcomes(statuses: list[dict]) -> dict:
         "stops_skipped": sum(len(s.get("skipped_stops", [])) for s in statuses),
         "pedestrians": len(statuses),
     }
+
+
+def bench_env(env: Path, probe: str, packages: list[str]) -> Path:
+    """The Python of a benchmark's own environment at ``env`` (created with ``packages`` on first use).
+
+    Reference tools that judge our output live in such environments, never in ``song``'s own.
+    ``probe`` is Python code that succeeds once the environment is ready (e.g. ``"import bpy"``).
+    """
+    python = env / "bin" / "python"
+    if python.is_file() and subprocess.run([str(python), "-c", probe], capture_output=True).returncode == 0:
+        return python
+    subprocess.run([sys.executable, "-m", "venv", str(env)], check=True)
+    subprocess.run([str(python), "-m", "pip", "install", "--quiet", *packages], check=True)
+    return python

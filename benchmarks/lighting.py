@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks._common import ROOT, emit  # noqa: E402
+from benchmarks._common import ROOT, bench_env, emit  # noqa: E402
 
 SCENES = ("office_0000", "clinic_0001", "procthor_house_6", "procthor_house_1")
 ENV = ROOT / "build" / "bench-envs" / "cycles"
@@ -45,13 +45,7 @@ HFOV, CAMERA_HEIGHT = 70.0, 0.8
 
 def ensure_cycles() -> Path:
     """The Python of the benchmark's own ``bpy`` environment (created on first use)."""
-    python = ENV / "bin" / "python"
-    probe = [str(python), "-c", "import bpy"]
-    if python.is_file() and subprocess.run(probe, capture_output=True).returncode == 0:
-        return python
-    subprocess.run([sys.executable, "-m", "venv", str(ENV)], check=True)
-    subprocess.run([str(python), "-m", "pip", "install", "--quiet", f"bpy=={BPY_VERSION}"], check=True)
-    return python
+    return bench_env(ENV, "import bpy", [f"bpy=={BPY_VERSION}"])
 
 
 def luminance(png_rgb: np.ndarray) -> np.ndarray:

@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks._common import ROOT, emit  # noqa: E402
+from benchmarks._common import ROOT, bench_env, emit  # noqa: E402
 
 ENV = ROOT / "build" / "bench-envs" / "people"
 MEDIAPIPE_VERSION = "0.10.21"
@@ -79,13 +79,7 @@ FACE_CROP_M = 0.6
 
 def ensure_detectors() -> Path:
     """The Python of the benchmark's own MediaPipe environment (created on first use)."""
-    python = ENV / "bin" / "python"
-    probe = [str(python), "-c", "import mediapipe, cv2"]
-    if python.is_file() and subprocess.run(probe, capture_output=True).returncode == 0:
-        return python
-    subprocess.run([sys.executable, "-m", "venv", str(ENV)], check=True)
-    subprocess.run([str(python), "-m", "pip", "install", "--quiet", f"mediapipe=={MEDIAPIPE_VERSION}"], check=True)
-    return python
+    return bench_env(ENV, "import mediapipe, cv2", [f"mediapipe=={MEDIAPIPE_VERSION}"])
 
 
 def _box(mask: np.ndarray) -> list[int] | None:
