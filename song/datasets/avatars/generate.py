@@ -659,8 +659,8 @@ def _split(weights: np.ndarray, total: int) -> np.ndarray:
     return counts
 
 
-def _inside(part: _Part, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Which points lie inside a part's volume, and their unit directions from its centre (ellipsoids)."""
+def _inside(part: _Part, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Which points lie inside a part's volume, and their unit directions from its centre (None for a tube)."""
     if part.end is None:
         u = (points - part.start) / np.asarray(part.radii)
         r = np.linalg.norm(u, axis=1)
@@ -672,7 +672,7 @@ def _inside(part: _Part, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t = rel @ axis / length**2
     r = part.radii[0] + np.clip(t, 0.0, 1.0) * (part.radii[1] - part.radii[0])
     across = ((rel @ width) / r) ** 2 + ((rel @ depth) / (r * part.radii[2])) ** 2
-    return (t >= 0.0) & (t <= 1.0) & (across < 1.0), rel
+    return (t >= 0.0) & (t <= 1.0) & (across < 1.0), None
 
 
 def _layer_colours(p: AvatarParams, parts: list[_Part], regions: np.ndarray, means: np.ndarray, colours) -> None:

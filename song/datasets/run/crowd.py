@@ -132,8 +132,9 @@ class PedestrianStatus(BaseModel):
 
     ``arrived``: at the last stop of its routine (``arrival_s``: when it got there, even if it later
     stepped aside to make room for a walker); ``gave_up``: stalled for good on its last leg, it
-    stepped out of the way and stands there (its track is kept; ``gave_up_s``: when it gave up); ``timeout``: still under way when the
-    simulation ended; ``removed``: it could not start (no track; ``reason`` says why).
+    stepped out of the way and stands there (its track is kept; ``gave_up_s``: when it gave up);
+    ``timeout``: still under way when the simulation ended; ``removed``: it could not start (no
+    track; ``reason`` says why).
     """
 
     model_config = ConfigDict(extra="forbid")
