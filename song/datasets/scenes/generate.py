@@ -206,6 +206,55 @@ def _layout(venue: str, rng: np.random.Generator):
     return width, height, (cy0, cy1), rooms
 
 
+# a companion stands by its anchor, as in a furnished room (a coffee table before the sofa, armchairs
+# at its ends): the gap to the anchor's group is its own, not the walkway kept between other furniture
+COMPANIONS: dict[str, tuple[str, float]] = {"coffee_table": ("sofa", 0.4), "armchair": ("coffee_table", 0.35)}
+GROUP = ("sofa", "coffee_table", "armchair")
+
+
+def _rect(cx: float, cy: float, ww: float, dd: float) -> np.ndarray:
+    return np.array(
+        [[cx - ww / 2, cy - dd / 2], [cx + ww / 2, cy - dd / 2], [cx + ww / 2, cy + dd / 2], [cx - ww / 2, cy + dd / 2]]
+    )
+
+
+def _beside(anchor: np.ndarray, w: float, d: float, gap: float, room: tuple) -> list[np.ndarray]:
+    """Rectangles (w along the side it faces, d across) beside each side of ``anchor``.
+
+    Its long sides first, and of two sides the one with more room in front of it first.
+    """
+    (ax0, ay0), (ax1, ay1) = anchor.min(axis=0), anchor.max(axis=0)
+    cx, cy = (ax0 + ax1) / 2, (ay0 + ay1) / 2
+    x0, y0, x1, y1 = room
+    sides = [  # (room in front of the side, rectangle)
+        (y1 - ay1, _rect(cx, ay1 + gap + d / 2, w, d)),
+        (ay0 - y0, _rect(cx, ay0 - gap - d / 2, w, d)),
+        (x1 - ax1, _rect(ax1 + gap + d / 2, cy, d, w)),
+        (ax0 - x0, _rect(ax0 - gap - d / 2, cy, d, w)),
+    ]
+    horizontal = ax1 - ax0 >= ay1 - ay0  # the anchor's long sides are its top and bottom
+    long_sides, short_sides = (sides[:2], sides[2:]) if horizontal else (sides[2:], sides[:2])
+    return [r for _, r in sorted(long_sides, key=lambda t: -t[0]) + sorted(short_sides, key=lambda t: -t[0])]
+
+
+def _fits(shape, room: _Room, door, placed: list[np.ndarray], group: list[np.ndarray], margin: float) -> bool:
+    from shapely.geometry import Polygon
+
+    x0, y0, x1, y1 = room.rect
+    (sx0, sy0), (sx1, sy1) = (
+        np.asarray(shape.exterior.coords).min(axis=0),
+        np.asarray(shape.exterior.coords).max(axis=0),
+    )
+    if sx0 < x0 + margin or sy0 < y0 + margin or sx1 > x1 - margin or sy1 > y1 - margin:
+        return False
+    if shape.distance(door) < DOOR_CLEAR_M + room.door[2] / 2:
+        return False
+    others = [p for p in placed if not any(p is g for g in group)]
+    if any(shape.distance(Polygon(p)) < 0.9 for p in others):  # a walkway between furniture
+        return False
+    return all(shape.distance(Polygon(p)) >= 0.3 for p in group)
+
+
 def _place_items(
     room: _Room, rng: np.random.Generator, placed: list[np.ndarray]
 ) -> list[tuple[str, np.ndarray, float]]:
@@ -216,7 +265,20 @@ def _place_items(
     door = Point(room.door[0], room.door[1])
     for item in room.items:
         label, category, w, d, h = FURNITURE[item]
-        for _ in range(60):
+        group = [c for it, c, _ in out if it in GROUP]
+        anchors = [c for it, c, _ in out if item in COMPANIONS and it == COMPANIONS[item][0]]
+        done = False
+        for anchor in anchors:
+            for corners in _beside(anchor, w, d, COMPANIONS[item][1], room.rect):
+                corners = np.round(corners, 3)
+                if _fits(Polygon(corners), room, door, placed, group, 0.05):
+                    placed.append(corners)
+                    out.append((item, corners, h))
+                    done = True
+                    break
+            if done:
+                break
+        for _ in range(0 if done else 60):
             rotate = rng.random() < 0.5
             ww, dd = (d, w) if rotate else (w, d)
             if ww > x1 - x0 - 0.8 or dd > y1 - y0 - 0.8:
@@ -227,21 +289,11 @@ def _place_items(
                 cy = (y0 + dd / 2 + 0.05) if rng.random() < 0.5 else (y1 - dd / 2 - 0.05)
             else:
                 cy = rng.uniform(y0 + 0.4 + dd / 2, y1 - 0.4 - dd / 2)
-            corners = np.array(
-                [
-                    [cx - ww / 2, cy - dd / 2],
-                    [cx + ww / 2, cy - dd / 2],
-                    [cx + ww / 2, cy + dd / 2],
-                    [cx - ww / 2, cy + dd / 2],
-                ]
-            )
-            shape = Polygon(corners)
-            if shape.distance(door) < DOOR_CLEAR_M + room.door[2] / 2:
-                continue
-            if any(shape.distance(Polygon(p)) < 0.9 for p in placed):  # a walkway between furniture
+            corners = np.round(_rect(cx, cy, ww, dd), 3)
+            if not _fits(Polygon(corners), room, door, placed, [], 0.0):
                 continue
             placed.append(corners)
-            out.append((item, np.round(corners, 3), h))
+            out.append((item, corners, h))
             break
     return out
 

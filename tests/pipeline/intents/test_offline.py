@@ -90,7 +90,7 @@ def test_lobby_with_few_objects_reaches_the_configured_density(tmp_path: Path) -
     config = SongConfig()
     intents = generate_intents(package, config, np.random.default_rng(0)).intents
     walk = walkable(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
-    assert len(intents) == pedestrian_count(walk.area_m2, config) == config.intents.max_pedestrians
+    assert len(intents) == pedestrian_count(walk.area_m2, config) >= 10  # the density, with people sharing objects
     standing = np.array([i.start_xy for i in intents] + [i.goal_xy for i in intents])
     gaps = np.linalg.norm(standing[:, None] - standing[None], axis=-1) + np.eye(len(standing)) * 9
     assert gaps.min() >= config.intents.min_spawn_separation_m - 1e-9  # nobody waits on another's spot (to rounding)
