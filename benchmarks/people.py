@@ -52,6 +52,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks._common import ROOT, bench_env, emit  # noqa: E402
+from song.geometry.skeleton import JOINT_INDEX  # noqa: E402
 
 ENV = ROOT / "build" / "bench-envs" / "people"
 MEDIAPIPE_VERSION = "0.10.21"
@@ -141,13 +142,13 @@ def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], s
             if d <= 2.0:
                 mp_list.append(_face_hit(det["face_short"], frame))
             if d >= 1.5:
-                haar_list.append(_face_hit([[*b[:4]] for b in det["haar"]], frame))
+                haar_list.append(_face_hit(det["haar"], frame))
             continue
         box = frame["box"]
         box_h = box[3] - box[1]
         found = any(_iou_boxes(_standard(box), _hog_person(b)) >= 0.5 for b in det["hog"])
         hog.append(found)
-        if box_h * HOG_WINDOW_RATIO <= frame.get("image_height", HEIGHT):
+        if box_h * HOG_WINDOW_RATIO <= HEIGHT:
             hog_fits.append(found)
         if d >= 2.7:
             for where, key in (("frame", "pose"), ("crop", "pose_crop")):
@@ -188,20 +189,10 @@ def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], s
     }
 
 
-def _project(camera, points: np.ndarray) -> np.ndarray:
-    """Pixel coordinates (N, 2) of world points (N, 3)."""
-    local = (points - camera.position) @ camera.rotation.T
-    return np.column_stack(
-        [camera.fx * local[:, 0] / local[:, 2] + camera.cx, camera.fy * local[:, 1] / local[:, 2] + camera.cy]
-    )
-
-
 def _frame_record(camera, joints, mask, distance: float, kind: str, name: str) -> dict:
     """A frame's ground truth: the person's box, projected joints, head and the two crops."""
-    from song.geometry.skeleton import JOINT_INDEX
-
     box = _box(mask)
-    px = _project(camera, joints)
+    px = camera.project(joints)[0]
     head_px = px[JOINT_INDEX["head"]]
     side = int(1.25 * (box[3] - box[1]))
     cx, cy = (box[0] + box[2]) // 2, (box[1] + box[3]) // 2
@@ -219,17 +210,42 @@ def _frame_record(camera, joints, mask, distance: float, kind: str, name: str) -
     }
 
 
+def _joints(transforms: np.ndarray, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World joints (24, 3) and the pelvis's forward direction from skinning transforms (24, 3, 4)."""
+    joints = np.einsum("jab,jb->ja", transforms[:, :, :3], rest) + transforms[:, :, 3]
+    return joints, transforms[JOINT_INDEX["pelvis"], :, :3] @ np.array([1.0, 0.0, 0.0])
+
+
+def _viewpoint(joints: np.ndarray, forward: np.ndarray, distance: float, facing: float, kind: str):
+    """The camera ``distance`` m from a person, ``facing`` rad from where its body faces (``forward``),
+    looking at it: the robot camera for ``body`` frames, a level camera at head height otherwise."""
+    from song.render import look_at
+
+    angle = math.atan2(forward[1], forward[0]) + facing
+    root = joints[JOINT_INDEX["pelvis"], :2]
+    height = ROBOT_CAMERA_M if kind == "body" else float(joints[JOINT_INDEX["head"], 2])
+    eye = np.array([*(root + distance * np.array([math.cos(angle), math.sin(angle)])), height])
+    return look_at(eye, np.array([root[0], root[1], height]), WIDTH, HEIGHT, HFOV)
+
+
+def _write_frame(out: Path, index: int, rgb: np.ndarray, mask: np.ndarray) -> str:
+    """Write ``frame_NNNN.png`` and our person mask ``mask_NNNN.png``; the frame's file name."""
+    import cv2
+
+    name = f"frame_{index:04d}.png"
+    cv2.imwrite(str(out / name), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    cv2.imwrite(str(out / f"mask_{index:04d}.png"), mask.astype(np.uint8) * 255)
+    return name
+
+
 def portrait(asset, distance: float, facing_deg: float, kind: str, out: Path, index: int) -> dict:
     """One identity mid-stride (the procedural gait) in front of a plain wall colour, seen as a ``face`` /
     ``back`` frame (camera at the head joint's height) or a ``body`` frame (the robot camera); writes
     ``frame_NNNN.png`` and ``mask_NNNN.png`` into ``out`` and returns the frame's record."""
-    import cv2
-
     from song.datasets.avatars.cache import skin_asset
-    from song.geometry.fk import forward_kinematics, skinning_transforms
+    from song.geometry.fk import skinning_transforms
     from song.geometry.lbs import lbs_positions, lbs_rotations
-    from song.geometry.skeleton import JOINT_INDEX
-    from song.render import GaussianSet, look_at, render
+    from song.render import GaussianSet, render
     from song.viz.avatar import walk_motion
 
     motion, frame = walk_motion(), 60
@@ -245,29 +261,19 @@ def portrait(asset, distance: float, facing_deg: float, kind: str, out: Path, in
         g.opacity_logits,
         g.sh_dc,
     )
-    joints, rots = forward_kinematics(rest, motion.local_quats[frame], motion.root_pos[frame] * scale)
-    forward = rots[JOINT_INDEX["pelvis"]] @ np.array([1.0, 0.0, 0.0])
-    angle = math.atan2(forward[1], forward[0]) + math.radians(facing_deg)
-    root = joints[JOINT_INDEX["pelvis"], :2]
-    height = ROBOT_CAMERA_M if kind == "body" else float(joints[JOINT_INDEX["head"], 2])
-    eye = np.array([*(root + distance * np.array([math.cos(angle), math.sin(angle)])), height])
-    camera = look_at(eye, np.array([root[0], root[1], height]), WIDTH, HEIGHT, HFOV)
+    joints, forward = _joints(transforms, rest)
+    camera = _viewpoint(joints, forward, distance, math.radians(facing_deg), kind)
     frame_out = render([posed], camera, "numba", background=(0.62, 0.58, 0.52))
-    name = f"frame_{index:04d}.png"
-    cv2.imwrite(str(out / name), cv2.cvtColor(frame_out.rgb, cv2.COLOR_RGB2BGR))
     mask = frame_out.alpha > 0.5
-    cv2.imwrite(str(out / f"mask_{index:04d}.png"), mask.astype(np.uint8) * 255)
+    name = _write_frame(out, index, frame_out.rgb, mask)
     return _frame_record(camera, joints, mask, distance, kind, name)
 
 
 def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: int) -> list[dict]:
     """Render the ``body`` and ``face`` frames into ``out`` (PNG + our masks) and return their records."""
-    import cv2
-
     from song.datasets.bench import open_benchmark
     from song.geometry.grid import world_to_cell
-    from song.geometry.skeleton import JOINT_INDEX
-    from song.render import look_at, render
+    from song.render import render
     from song.runtime.vision import SceneView
 
     bench = open_benchmark(str(bench_path))
@@ -290,28 +296,19 @@ def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: i
             avatar = view._avatar(k)
             if avatar.posed is None:
                 continue
-            transforms = avatar.posed.motion.transforms_at(t)
-            rest = avatar.posed.motion.rest_joints.astype(np.float64)
-            joints = np.einsum("jab,jb->ja", transforms[:, :, :3], rest) + transforms[:, :, 3]
-            forward = transforms[JOINT_INDEX["pelvis"], :, :3] @ np.array([1.0, 0.0, 0.0])
-            heading = math.atan2(forward[1], forward[0])
+            motion = avatar.posed.motion
+            joints, forward = _joints(motion.transforms_at(t), motion.rest_joints.astype(np.float64))
             if kind == "body":
                 d, phi = float(rng.uniform(2.0, 8.0)), math.radians(float(rng.uniform(-60, 60)))
             else:
                 d, phi = float(rng.uniform(1.0, 2.5)), math.radians(float(rng.uniform(-15, 15)))
                 phi += math.pi if kind == "back" else 0.0
-            root = joints[JOINT_INDEX["pelvis"], :2]
-            eye_xy = root + d * np.array([math.cos(heading + phi), math.sin(heading + phi)])
+            camera = _viewpoint(joints, forward, d, phi, kind)
             grid = episode.static_map
             free = grid.free
-            r, c = world_to_cell(eye_xy[None, :], free.shape[0], grid.resolution, grid.origin)[0]
+            r, c = world_to_cell(camera.position[None, :2], free.shape[0], grid.resolution, grid.origin)[0]
             if not (0 <= r < free.shape[0] and 0 <= c < free.shape[1]) or not free[r, c]:
                 continue
-            head = joints[JOINT_INDEX["head"]]
-            height = ROBOT_CAMERA_M if kind == "body" else float(head[2])
-            eye = np.array([eye_xy[0], eye_xy[1], height])
-            target = np.array([root[0], root[1], height])
-            camera = look_at(eye, target, WIDTH, HEIGHT, HFOV)
             person = view.posed_avatars([k], t)
             alone = render(person[-1:], camera, "numba")
             full = render([view._scene, *person], camera, "numba")
@@ -321,10 +318,7 @@ def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: i
             hidden = (full.depth[mask] < alone.depth[mask] - 0.2).mean()
             if hidden > 0.05:
                 continue
-            index = len(frames)
-            name = f"frame_{index:04d}.png"
-            cv2.imwrite(str(out / name), cv2.cvtColor(full.rgb, cv2.COLOR_RGB2BGR))
-            cv2.imwrite(str(out / f"mask_{index:04d}.png"), mask.astype(np.uint8) * 255)
+            name = _write_frame(out, len(frames), full.rgb, mask)
             record = _frame_record(camera, joints, mask, d, kind, name)
             frames.append(
                 {

@@ -238,13 +238,11 @@ def _beside(anchor: np.ndarray, w: float, d: float, gap: float, room: tuple) -> 
 
 
 def _fits(shape, room: _Room, door, placed: list[np.ndarray], group: list[np.ndarray], margin: float) -> bool:
+    """Inside the room by ``margin``, clear of its door, a walkway from all furniture but ``group`` (0.3 m)."""
     from shapely.geometry import Polygon
 
     x0, y0, x1, y1 = room.rect
-    (sx0, sy0), (sx1, sy1) = (
-        np.asarray(shape.exterior.coords).min(axis=0),
-        np.asarray(shape.exterior.coords).max(axis=0),
-    )
+    sx0, sy0, sx1, sy1 = shape.bounds
     if sx0 < x0 + margin or sy0 < y0 + margin or sx1 > x1 - margin or sy1 > y1 - margin:
         return False
     if shape.distance(door) < DOOR_CLEAR_M + room.door[2] / 2:
