@@ -9,7 +9,7 @@ import typer
 from song.cli import app
 from song.cli.common import console, handle_errors, status_table
 
-avatars_app = typer.Typer(help="Gaussian avatars: build a procedural pool, import a 3DGS PLY.", no_args_is_help=True)
+avatars_app = typer.Typer(help="Gaussian avatars: build a pool, import a 3DGS PLY.", no_args_is_help=True)
 app.add_typer(avatars_app, name="avatars")
 
 
@@ -20,6 +20,7 @@ def _row(asset) -> dict:
         "id": asset.avatar_id,
         "height m": f"{asset.height_m:.2f}",
         "clothing": f"{clothing} {gen.get('pattern', '')}".strip(),
+        "body": gen.get("body", ""),
         "hair": gen.get("hair", ""),
         "gaussians": f"{len(asset):,}",
     }
@@ -32,12 +33,17 @@ def build(
     count: int = typer.Option(128, "--count", min=1, help="identities"),
     seed: int = typer.Option(0, "--seed", help="pool seed (avatar i depends only on seed and i)"),
     gaussians: int = typer.Option(40_000, "--gaussians", min=5_000, max=100_000, help="Gaussians per avatar"),
+    body: str = typer.Option(
+        None, "--body", help="anny (the parametric body model) or procedural (default: anny where installed)"
+    ),
 ) -> None:
-    """Generate procedural identities (parametric body, clothing, hair, skin tone)."""
+    """Generate identities (a body shaped from anthropometry, clothing, hair, skin tone)."""
     from song.datasets.avatars import load_avatar
-    from song.datasets.avatars.generate import build_pool
+    from song.datasets.avatars.generate import BODIES, build_pool
 
-    paths = build_pool(out, count, seed, gaussians)
+    if body is not None and body not in BODIES:
+        raise typer.BadParameter(f"--body {body!r}: expected one of {', '.join(BODIES)}")
+    paths = build_pool(out, count, seed, gaussians, body=body)
     rows = [_row(load_avatar(path)) for path in paths]
     console.print(status_table(f"{len(paths)} avatars in {out}", rows, list(rows[0])))
 

@@ -38,7 +38,7 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import N_JOINTS, rest_joints
 from song.util import derive_rng
 
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 SKIN_TONES = np.array(  # sRGB 0–1, light to deep (a spread of real skin reflectances)
     [
         [0.96, 0.84, 0.74],
@@ -68,6 +68,7 @@ FABRICS = ("cotton", "knit", "denim")
 HAIR = ("short", "long", "bun", "ponytail", "bald", "bob", "curly")
 ACCESSORIES = {"glasses": 0.2, "bag": 0.2, "lanyard": 0.1}  # independent chances
 HEAD_DENSITY, HAND_DENSITY = 3.0, 2.0  # Gaussians per area relative to the body (faces and fingers resolve)
+EYE_DENSITY = 16.0  # Anny's eyeballs
 KEY_LIGHT = np.array([0.35, 0.2, 1.0]) / np.linalg.norm([0.35, 0.2, 1.0])
 AMBIENT = 0.66  # baked shading: AMBIENT + (1 − AMBIENT) · (½ + ½ n·L)
 
@@ -102,6 +103,7 @@ class AvatarParams:
     accessories: list[str]
     accessory_colour: list[float]
     stripe_m: float = 0.04
+    age_years: float = 30.0
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -170,7 +172,18 @@ def sample_params(rng: np.random.Generator) -> AvatarParams:
         accessories=accessories,
         accessory_colour=_colour(rng),
         stripe_m=round(float(rng.uniform(0.025, 0.06)), 4),
+        age_years=_age_years(body, rng),
     )
+
+
+def _age_years(body: Body, rng: np.random.Generator) -> float:
+    """Age: a child's from its stature on the CDC curve (6–12), an adult's 20–64, an older adult's 65–85."""
+    from song.datasets.avatars import anthropometry as a
+
+    if body.age_group == "child":
+        years = a.CHILD_AGE[0] + (body.stature_m - a.CHILD_STATURE_AT_6_M) / a.CHILD_GROWTH_M_PER_YEAR
+        return round(float(np.clip(years, *a.CHILD_AGE)), 2)
+    return round(float(rng.uniform(20.0, 64.0) if body.age_group == "adult" else rng.uniform(65.0, 85.0)), 2)
 
 
 # ---- surfaces -------------------------------------------------------------------------------------
@@ -282,8 +295,15 @@ def _side_parts(
     ]  # fmt: skip
 
 
-def _layer_parts(p: AvatarParams, rest: np.ndarray, hc: np.ndarray, hr: np.ndarray, waist_half: float) -> list[_Part]:
-    """Skirt, hair and accessories over the body."""
+def _layer_parts(
+    p: AvatarParams,
+    rest: np.ndarray,
+    hc: np.ndarray,
+    hr: np.ndarray,
+    waist_half: float,
+    eyes: np.ndarray | None = None,
+) -> list[_Part]:
+    """Skirt, hair and accessories over the body (``eyes``: the body's eyeball centres, if it has any)."""
     h, g = p.height_m, p.girth
     s = h / 1.75
     pelvis = rest[J["pelvis"]]
@@ -323,7 +343,9 @@ def _layer_parts(p: AvatarParams, rest: np.ndarray, hc: np.ndarray, hr: np.ndarr
         parts.append(blob("bag", centre, np.array([0.1, 0.045, 0.12]) * s, "bag"))
     if "glasses" in p.accessories:
         for side in (1.0, -1.0):
-            eye = hc + hr * _EYE_DIR * np.array([1.0, side, 1.0])
+            eye = hc + hr * _EYE_DIR * np.array([1.0, side, 1.0]) if eyes is None else eyes[0 if side > 0 else 1]
+            if eyes is not None:
+                eye = eye + np.array([0.01 * s, 0.0, 0.0])  # in front of the eyeball, not on it
             parts.append(
                 _Part(
                     f"lens_{side:+.0f}",
@@ -427,19 +449,24 @@ def _soft(v: np.ndarray, cy: float, cz: float, ry: float, rz: float) -> np.ndarr
     return (v[:, 0] > 0.3) * np.exp(-(((v[:, 1] - cy) / ry) ** 2 + ((v[:, 2] - cz) / rz) ** 2))
 
 
-def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray) -> None:
+def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray, eyeballs: bool = True) -> None:
     """A face on the head's front (``v``: unit directions, x forward).
 
     First the shading a face's relief gets under light from above (eye sockets under the brow ridge, the
     sides of the nose, under the nose and the lower lip), then eyes (sclera, iris, pupil, the upper lid's
-    lash line), brows, lips and cheeks.
+    lash line), brows, lips and cheeks. ``eyeballs`` False leaves the eyes to a body with eyeballs of its
+    own (the lash line stays).
     """
     skin = np.array(p.skin)
     ez = _EYE_DIR[2]
-    shade = 1.0 - 0.42 * (_soft(v, _EYE_DIR[1], ez - 0.01, 0.17, 0.1) + _soft(v, -_EYE_DIR[1], ez - 0.01, 0.17, 0.1))
-    shade -= 0.22 * (_soft(v, 0.11, -0.1, 0.05, 0.12) + _soft(v, -0.11, -0.1, 0.05, 0.12))  # beside the nose
-    shade -= 0.25 * _soft(v, 0.0, -0.22, 0.09, 0.035) + 0.2 * _soft(v, 0.0, -0.43, 0.14, 0.04)  # under nose, lip
-    shade += 0.06 * _soft(v, 0.0, ez + 0.02, 0.06, 0.2)  # the bridge of the nose catches the light
+    sockets = _soft(v, _EYE_DIR[1], ez - 0.01, 0.17, 0.1) + _soft(v, -_EYE_DIR[1], ez - 0.01, 0.17, 0.1)
+    if eyeballs:  # an ellipsoid head: all its relief is painted
+        shade = 1.0 - 0.42 * sockets
+        shade -= 0.22 * (_soft(v, 0.11, -0.1, 0.05, 0.12) + _soft(v, -0.11, -0.1, 0.05, 0.12))  # beside the nose
+        shade -= 0.25 * _soft(v, 0.0, -0.22, 0.09, 0.035) + 0.2 * _soft(v, 0.0, -0.43, 0.14, 0.04)  # under nose, lip
+        shade += 0.06 * _soft(v, 0.0, ez + 0.02, 0.06, 0.2)  # the bridge of the nose catches the light
+    else:  # a modelled face has its nose and lips; only the sockets' shadow under the brow is painted
+        shade = 1.0 - 0.25 * sockets
     dark = 1.0 - np.clip(shade, 0.45, 1.1)[:, None]
     out *= 1.0 - dark * [0.85, 1.0, 1.05]  # shadow on skin is warm: red light scatters under it
     # the sheen of skin where the face turns to the light (forehead, nose bridge, cheekbones): what gives
@@ -449,9 +476,10 @@ def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray) -> None:
     out += (0.35 * np.clip(sheen, 0.0, 1.0))[:, None] * (1.0 - out) * (1.0 - np.mean(skin))
     for side in (1.0, -1.0):
         ey = side * _EYE_DIR[1]
-        out[_ellipse(v, ey, ez, 0.11, 0.045)] = [0.78, 0.75, 0.72]
-        out[_ellipse(v, ey, ez, 0.055, 0.045)] = np.array(p.eye_colour) * 0.7
-        out[_ellipse(v, ey, ez, 0.025, 0.025)] = [0.03, 0.03, 0.03]
+        if eyeballs:
+            out[_ellipse(v, ey, ez, 0.11, 0.045)] = [0.78, 0.75, 0.72]
+            out[_ellipse(v, ey, ez, 0.055, 0.045)] = np.array(p.eye_colour) * 0.7
+            out[_ellipse(v, ey, ez, 0.025, 0.025)] = [0.03, 0.03, 0.03]
         out[_ellipse(v, ey, ez + 0.04, 0.12, 0.016)] = [0.1, 0.07, 0.06]  # the lash line
         brow = np.array(p.hair_colour) * 0.6 if np.mean(p.hair_colour) < 0.6 else skin * 0.55
         out[_ellipse(v, side * 0.35, ez + 0.13, 0.15, 0.034)] = brow
@@ -721,17 +749,25 @@ def _sample_part(p: AvatarParams, part: _Part, count: int, rng: np.random.Genera
     return pts[kept], nrm[kept], t[kept], v[kept]
 
 
-def generate_avatar(
-    rng: np.random.Generator, avatar_id: str, n_gaussians: int = 40_000, params: AvatarParams | None = None
-) -> AvatarAsset:
-    """One procedural identity with exactly ``n_gaussians`` Gaussians (5,000–100,000)."""
-    if not 5_000 <= n_gaussians <= 100_000:
-        raise ValueError(f"n_gaussians={n_gaussians}: expected 5,000–100,000")
-    p = params or sample_params(rng)
-    rest = rest_joints(p.height_m)
+@dataclass
+class _Surfels:
+    """An identity's Gaussians before the baked light: positions, normals, colours, spacing, skinning."""
+
+    means: np.ndarray
+    normals: np.ndarray
+    colours: np.ndarray
+    spacing: np.ndarray
+    indices: np.ndarray
+    weights: np.ndarray
+    body_radius_m: float
+    extra: dict[str, Any]
+
+
+def _procedural_surfels(p: AvatarParams, rest: np.ndarray, n: int, rng: np.random.Generator) -> _Surfels:
+    """The procedural body: tubes and ellipsoids around the bones, weights by bone distance."""
     parts = _body_parts(p, rest)
     areas = np.array([_area(part) for part in parts])
-    counts = _split(areas * np.array([part.density for part in parts]), n_gaussians)
+    counts = _split(areas * np.array([part.density for part in parts]), n)
     means, normals, colours, spacing, hanging = [], [], [], [], []
     for part, count, area in zip(parts, counts, areas, strict=True):
         points, normal, t, v = _sample_part(p, part, int(count), rng)
@@ -744,37 +780,319 @@ def generate_avatar(
     means, normals, colours, spacing, hanging = map(np.concatenate, (means, normals, colours, spacing, hanging))
     _layer_colours(p, parts, regions, means, colours)
     means[:, 2] -= means[:, 2].min()  # soles on z = 0
-    colours = _shade(colours, normals, means, p.height_m)
-    colours = np.clip(colours * rng.uniform(0.975, 1.025, (len(colours), 1)), 0.0, 1.0)  # fine grain
     indices, weights = transfer_weights(means, rest, p.height_m)
+    _hang_from_pelvis(p, rest, means, hanging, indices, weights)
+    return _Surfels(means, normals, colours, spacing, indices, weights, p.body.body_radius_m, {})
+
+
+def _hang_from_pelvis(p, rest, means, hanging, indices, weights) -> None:
+    """Skirts and bags follow the hips (in place)."""
     if hanging.any():
         top = float(rest[J["pelvis"], 2] + 0.03 * p.height_m / 1.75)
         indices[hanging], weights[hanging] = _pelvis_weights(means[hanging], top, top - 0.33 * p.height_m)
+
+
+# ---- the Anny body ---------------------------------------------------------------------------------
+_MESH_REGION = {  # dominant joint → the colour region of the procedural parts it replaces
+    "pelvis": "torso",
+    "spine1": "torso",
+    "spine2": "torso",
+    "spine3": "torso",
+    "left_collar": "torso",
+    "right_collar": "torso",
+    "neck": "neck",
+    "head": "head",
+    "left_shoulder": "left_upper_arm",
+    "right_shoulder": "right_upper_arm",
+    "left_elbow": "left_forearm",
+    "right_elbow": "right_forearm",
+    "left_wrist": "hand",
+    "right_wrist": "hand",
+    "left_hand": "hand",
+    "right_hand": "hand",
+    "left_hip": "left_thigh",
+    "right_hip": "right_thigh",
+    "left_knee": "left_shin",
+    "right_knee": "right_shin",
+    "left_ankle": "foot",
+    "right_ankle": "foot",
+    "left_foot": "foot",
+    "right_foot": "foot",
+}
+_MESH_BONE = {  # a limb region's bone (start, end joints): where along it and around it a point lies
+    "torso": ("pelvis", "neck"),
+    "left_upper_arm": ("left_shoulder", "left_elbow"),
+    "right_upper_arm": ("right_shoulder", "right_elbow"),
+    "left_forearm": ("left_elbow", "left_wrist"),
+    "right_forearm": ("right_elbow", "right_wrist"),
+    "left_thigh": ("left_hip", "left_knee"),
+    "right_thigh": ("right_hip", "right_knee"),
+    "left_shin": ("left_knee", "left_ankle"),
+    "right_shin": ("right_knee", "right_ankle"),
+}
+
+
+def _anny_z(p: AvatarParams) -> dict[str, float]:
+    """The identity's z-scores that choose Anny's height, weight and muscle (adults; children sit at 0)."""
+    from song.datasets.avatars.anthropometry import ANSUR_II
+
+    if p.age_group == "child":
+        return {"weight": (p.girth - 1.0) / 0.07}
+    table = ANSUR_II[p.sex]
+    return {
+        "height": (p.height_m - table["stature"][0]) / table["stature"][1],
+        "weight": 0.5 * (p.girth - 1.0) / 0.07 + 0.5 * (p.hip_m - table["hip"][0]) / table["hip"][1],
+        "muscle": (p.biacromial_m - table["biacromial"][0]) / table["biacromial"][1],
+    }
+
+
+def _mesh_density(mesh) -> np.ndarray:
+    """Gaussians per area of each face relative to the body: head and hands denser, the eyes densest.
+
+    A pupil is ~4 mm across: it takes fine discs to show.
+    """
+    region = mesh.face_region
+    return np.select(
+        [region == "eye", region == "head", region == "hand"], [EYE_DENSITY, HEAD_DENSITY, HAND_DENSITY], 1.0
+    )
+
+
+def _mesh_sample(mesh, count: int, rng: np.random.Generator):
+    """``count`` evenly spread points on the mesh (head and hands denser): points, normals, faces, spacing, weights."""
+    tri = mesh.vertices[mesh.faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    density = _mesh_density(mesh)
+    face = np.repeat(np.arange(len(area)), _split(area * density, count))
+    u, v = _plane_lattice(count, rng)  # consecutive points of R2 are far apart: a triangle's points spread
+    root = np.sqrt(u)
+    bary = np.column_stack([1.0 - root, root * (1.0 - v), root * v])
+    corners = mesh.faces[face]
+    points = np.einsum("nc,ncd->nd", bary, mesh.vertices[corners])
+    normals = np.einsum("nc,ncd->nd", bary, mesh.normals[corners])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    weights = np.einsum("nc,ncj->nj", bary, mesh.weights[corners])
+    spacing = np.sqrt(float((area * density).sum()) / count / density[face])
+    return points, normals, face, spacing, weights
+
+
+def _face_directions(points: np.ndarray, normals: np.ndarray, eyes: np.ndarray, mouth: np.ndarray) -> np.ndarray:
+    """Head points as the unit directions the painted face is drawn in, anchored on the real eyes and lips.
+
+    :func:`_face` paints on an ellipsoid's front: eyes at ±``_EYE_DIR``, the lips' meeting line at
+    z ≈ −0.32. A linear map of the face's own coordinates puts those marks where Anny's eyeballs and mouth
+    are; points not on the front of the face get x = 0 (no paint).
+    """
+    centre = eyes.mean(axis=0)
+    across = _EYE_DIR[1] / abs(eyes[0, 1] - centre[1])
+    down = (_EYE_DIR[2] + 0.32) / max(centre[2] - mouth[2], 1e-3)
+    v = np.zeros_like(points)
+    v[:, 1] = (points[:, 1] - centre[1]) * across
+    v[:, 2] = _EYE_DIR[2] + (points[:, 2] - centre[2]) * down
+    front = (points[:, 0] > centre[0] - 0.02) & (normals[:, 0] > 0.15)
+    v[front, 0] = 0.9
+    return v
+
+
+def _eye_colours(p: AvatarParams, points: np.ndarray, eyes: np.ndarray) -> np.ndarray:
+    """An eyeball: sclera, an iris of the identity's colour within 30° of its front, a pupil within 12°."""
+    out = np.tile([0.8, 0.77, 0.74], (len(points), 1))
+    centre = np.where((points[:, 1] > eyes[:, 1].mean())[:, None], eyes[0], eyes[1])
+    d = points - centre
+    front = d[:, 0] / np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+    out[front > np.cos(np.radians(30.0))] = np.array(p.eye_colour) * 0.7
+    out[front > np.cos(np.radians(12.0))] = [0.03, 0.03, 0.03]
+    return out
+
+
+def _mesh_colours(p: AvatarParams, mesh, rest: np.ndarray, points, normals, face, dominant) -> np.ndarray:
+    """Per-point RGB on the Anny body: clothing, skin, shoes and face by the region each point skins to."""
+    from song.geometry.skeleton import JOINT_NAMES
+
+    region = np.array([_MESH_REGION[JOINT_NAMES[j]] for j in range(N_JOINTS)])[dominant]
+    # the neckline: a crew neck, lower in front, whatever joint the points near it skin to
+    s = p.height_m / 1.75
+    neck = rest[J["neck"]]
+    line = neck[2] + 0.005 * s - 0.3 * np.clip(points[:, 0] - neck[0], 0.0, None) + 0.5 * np.abs(points[:, 1])
+    upper = np.isin(region, ("torso", "neck"))
+    region[upper] = np.where(points[upper, 2] < line[upper], "torso", "neck")
+    region[mesh.face_region[face] == "eye"] = "eye"
+    colours = np.zeros_like(points)
+    for name in np.unique(region):
+        sel = region == name
+        pts, nrm = points[sel], normals[sel]
+        if name == "eye":
+            colours[sel] = _eye_colours(p, pts, mesh.eyes)
+            continue
+        if name in _MESH_BONE:
+            a, b = (rest[J[joint]] for joint in _MESH_BONE[name])
+            axis = b - a
+            length = float(np.linalg.norm(axis))
+            width, depth = _frame(axis / length)
+            rel = pts - a
+            t = np.clip(rel @ axis / length**2, 0.0, 1.0)  # a limb's region runs a little past its joints
+            angle = np.arctan2(rel @ depth, rel @ width)
+            v = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(len(pts))])
+        else:
+            t, v = np.zeros(len(pts)), _face_directions(pts, nrm, mesh.eyes, mesh.mouth)
+        part = _Part(name, pts[0], None, (1.0, 1.0, 1.0), name)
+        if name == "head":
+            out = np.array(p.skin) * (1.0 + 0.035 * np.sin(pts[:, 0] * 23 + 1.3) * np.sin(pts[:, 1] * 19))[:, None]
+            _face(p, v, out, eyeballs=False)
+            colours[sel] = out
+        else:
+            colours[sel] = _colours(p, part, pts, nrm, t, v)
+    return colours
+
+
+def _head_shell(mesh, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """An ellipsoid around Anny's skull (the hair's shell): back of the head, forehead, crown, temples."""
+    head = np.unique(mesh.faces[np.isin(mesh.face_region, ("head",))])
+    eye_z = float(mesh.eyes[:, 2].mean())
+    skull = mesh.vertices[head]
+    skull = skull[skull[:, 2] > eye_z - 0.01 * s]
+    back = float(skull[:, 0].min())
+    front = float(skull[skull[:, 2] > eye_z + 0.03 * s, 0].max())
+    top = float(skull[:, 2].max())
+    centre = np.array([0.5 * (back + front), 0.0, eye_z + 0.01 * s])
+    radii = np.array([0.5 * (front - back), float(np.abs(skull[:, 1]).max()), top - centre[2]])
+    return centre, radii
+
+
+def _anny_surfels(p: AvatarParams, rest: np.ndarray, n: int, rng: np.random.Generator) -> _Surfels:
+    """Anny's body with the procedural clothing painted on it, and hair, skirt and kit as layers over it."""
+    from song.datasets.avatars import body_model
+
+    values = body_model.phenotype(p.sex, p.age_years, _anny_z(p))
+    mesh = body_model.anny_body(p.height_m, values)
+    s = p.height_m / 1.75
+    hc, hr = _head_shell(mesh, s)
+    dominant_v = mesh.weights.argmax(axis=1)
+    hip_band = np.abs(mesh.vertices[:, 2] - (rest[J["pelvis"], 2] + 0.03 * s)) < 0.02 * s
+    waist_half = float(np.abs(mesh.vertices[hip_band, 1]).max())
+    layers = _layer_parts(p, rest, hc, hr, waist_half / p.girth, eyes=mesh.eyes)
+    tri = mesh.vertices[mesh.faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    density = _mesh_density(mesh)
+    layer_area = np.array([_area(part) for part in layers])
+    counts = _split(np.concatenate([[float((area * density).sum())], layer_area * [q.density for q in layers]]), n)
+    points, normals, face, spacing, dense = _mesh_sample(mesh, int(counts[0]), rng)
+    dominant = dense.argmax(axis=1)
+    colours = _mesh_colours(p, mesh, rest, points, normals, face, dominant)
+    means, nrm, cols, spc, hanging, regions = (
+        [points],
+        [normals],
+        [colours],
+        [spacing],
+        [np.zeros(len(points), bool)],
+        [],
+    )
+    regions.append(np.full(len(points), "body"))
+    for part, count, a in zip(layers, counts[1:], layer_area, strict=True):
+        pts, nr, t, v = _sample_part(p, part, int(count), rng)
+        means.append(pts)
+        nrm.append(nr)
+        cols.append(_colours(p, part, pts, nr, t, v))
+        spc.append(np.full(len(pts), np.sqrt(a / max(int(count), 1))))
+        hanging.append(np.full(len(pts), part.region in ("skirt", "bag")))
+        regions.append(np.full(len(pts), part.region))
+    means, nrm, cols, spc, hanging, regions = map(np.concatenate, (means, nrm, cols, spc, hanging, regions))
+    _layer_colours(p, layers, regions, means, cols)
+    indices, weights = top_k(np.vstack([dense, np.zeros((len(means) - len(points), N_JOINTS))]))
+    layered = np.arange(len(means)) >= len(points)
+    if layered.any():  # hair, glasses, a skirt or a bag: by bone distance, then what hangs follows the hips
+        indices[layered], weights[layered] = transfer_weights(means[layered], rest, p.height_m)
+    _hang_from_pelvis(p, rest, means, hanging, indices, weights)
+    radius = _mesh_body_radius(mesh, rest, dominant_v)
+    extra = {"anny": {"version": body_model.ANNY_VERSION, **{k: round(v, 4) for k, v in values.items()}}}
+    return _Surfels(means, nrm, cols, spc, indices, weights, radius, extra)
+
+
+def _mesh_body_radius(mesh, rest: np.ndarray, dominant: np.ndarray) -> float:
+    """Half the larger of the bideltoid breadth and the hip breadth + 4 cm, measured on the body.
+
+    The bideltoid breadth is taken with the arms hanging: twice the shoulder joint's offset plus the
+    upper arm's median radius around its bone.
+    """
+    z = mesh.vertices[:, 2]
+    h = float(z.max())
+    legs = (z > 0.45 * h) & (z < 0.55 * h)
+    hip = 2.0 * float(np.abs(mesh.vertices[legs, 1]).max())
+    radii = []
+    for side in ("left", "right"):
+        sel = dominant == J[f"{side}_shoulder"]
+        a, b = rest[J[f"{side}_shoulder"]], rest[J[f"{side}_elbow"]]
+        axis = (b - a) / np.linalg.norm(b - a)
+        rel = mesh.vertices[sel] - a
+        radii.append(float(np.median(np.linalg.norm(rel - (rel @ axis)[:, None] * axis, axis=1))))
+    bideltoid = 2.0 * (abs(float(rest[J["left_shoulder"], 1])) + float(np.mean(radii)))
+    return round(0.5 * max(bideltoid, hip + 0.04), 4)
+
+
+BODIES = ("anny", "procedural")
+
+
+def default_body() -> str:
+    """``anny`` where it is installed (``pip install song[avatars]``), else ``procedural``."""
+    from song.datasets.avatars import body_model
+
+    return "anny" if body_model.available() else "procedural"
+
+
+def generate_avatar(
+    rng: np.random.Generator,
+    avatar_id: str,
+    n_gaussians: int = 40_000,
+    params: AvatarParams | None = None,
+    body: str | None = None,
+) -> AvatarAsset:
+    """One identity with exactly ``n_gaussians`` Gaussians (5,000–100,000).
+
+    ``body`` is ``anny`` (the parametric body model), ``procedural`` (surfaces around the bones) or None
+    (:func:`default_body`).
+    """
+    if not 5_000 <= n_gaussians <= 100_000:
+        raise ValueError(f"n_gaussians={n_gaussians}: expected 5,000–100,000")
+    body = body or default_body()
+    if body not in BODIES:
+        raise ValueError(f"body={body!r}: expected one of {BODIES}")
+    p = params or sample_params(rng)
+    rest = rest_joints(p.height_m)
+    made = (_anny_surfels if body == "anny" else _procedural_surfels)(p, rest, n_gaussians, rng)
+    colours = _shade(made.colours, made.normals, made.means, p.height_m)
+    colours = np.clip(colours * rng.uniform(0.975, 1.025, (len(colours), 1)), 0.0, 1.0)  # fine grain
+    spacing = made.spacing
     log_scales = np.log(np.column_stack([0.75 * spacing, 0.75 * spacing, 0.12 * spacing]))
     cloud = GaussianCloud(
-        means=means.astype(np.float32),
-        quats=_disc_quats(normals).astype(np.float32),
+        means=made.means.astype(np.float32),
+        quats=_disc_quats(made.normals).astype(np.float32),
         log_scales=log_scales.astype(np.float32),
         opacity_logits=np.full(n_gaussians, 4.0, np.float32),
         sh_dc=((colours - 0.5) / SH_C0).astype(np.float32),
     )
-    body = p.body
     meta = {
         "source": "procedural",
         "height_m": float(p.height_m),
         "scale": 1.0,
-        "body_radius_m": body.body_radius_m,
-        "generator": {"name": "song.datasets.avatars.generate", "version": GENERATOR_VERSION, **vars(p)},
+        "body_radius_m": made.body_radius_m,
+        "generator": {
+            "name": "song.datasets.avatars.generate",
+            "version": GENERATOR_VERSION,
+            "body": body,
+            **vars(p),
+            **made.extra,
+        },
     }
-    return AvatarAsset(avatar_id, cloud, indices, weights, rest.astype(np.float32), meta)
+    return AvatarAsset(avatar_id, cloud, made.indices, made.weights, rest.astype(np.float32), meta)
 
 
-def build_pool(out_dir: str | Path, count: int, seed: int, n_gaussians: int = 40_000) -> list[Path]:
-    """Write ``count`` identities ``avatar_{seed}_{i:04d}.avatar.npz``; avatar i depends only on (seed, i)."""
+def build_pool(
+    out_dir: str | Path, count: int, seed: int, n_gaussians: int = 40_000, body: str | None = None
+) -> list[Path]:
+    """Write ``count`` identities ``avatar_{seed}_{i:04d}.avatar.npz``; avatar i depends only on (seed, i, body)."""
     paths = []
     for index in range(count):
         rng = derive_rng(seed, "avatar", index)
-        asset = generate_avatar(rng, f"avatar_{seed}_{index:04d}", n_gaussians)
+        asset = generate_avatar(rng, f"avatar_{seed}_{index:04d}", n_gaussians, body=body)
         asset.meta["generator"].update(seed=seed, index=index)
         paths.append(save_avatar(asset, out_dir))
     return paths

@@ -1,6 +1,7 @@
 """The avatar pool a run binds from: a folder of ``*.avatar.npz`` assets, or the default procedural pool.
 
-The default pool is generated on first use (deterministic for its seed, size and Gaussian count) into
+The default pool is generated on first use (deterministic for its seed, size and Gaussian count, with
+Anny bodies where Anny is installed and procedural ones otherwise: the folder's name says which) into
 ``$SONG_CACHE_DIR/avatars/<key>/`` (``~/.cache/song`` when unset) and reused afterwards; it is never
 committed to the repository. A ``pool.json`` written last marks a complete pool, so an interrupted
 build is redone rather than trusted; concurrent builders write the same bytes atomically.
@@ -29,9 +30,9 @@ def cache_root() -> Path:
 
 def default_pool_dir(cfg: BindingConfig) -> Path:
     """Where the default pool for these settings lives."""
-    from song.datasets.avatars.generate import GENERATOR_VERSION
+    from song.datasets.avatars.generate import GENERATOR_VERSION, default_body
 
-    key = f"procedural-v{GENERATOR_VERSION}-seed{cfg.pool_seed}-n{cfg.pool_size}-g{cfg.n_gaussians}"
+    key = f"{default_body()}-v{GENERATOR_VERSION}-seed{cfg.pool_seed}-n{cfg.pool_size}-g{cfg.n_gaussians}"
     return cache_root() / "avatars" / key
 
 
