@@ -449,24 +449,19 @@ def _soft(v: np.ndarray, cy: float, cz: float, ry: float, rz: float) -> np.ndarr
     return (v[:, 0] > 0.3) * np.exp(-(((v[:, 1] - cy) / ry) ** 2 + ((v[:, 2] - cz) / rz) ** 2))
 
 
-def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray, eyeballs: bool = True) -> None:
+def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray) -> None:
     """A face on the head's front (``v``: unit directions, x forward).
 
     First the shading a face's relief gets under light from above (eye sockets under the brow ridge, the
     sides of the nose, under the nose and the lower lip), then eyes (sclera, iris, pupil, the upper lid's
-    lash line), brows, lips and cheeks. ``eyeballs`` False leaves the eyes to a body with eyeballs of its
-    own (the lash line stays).
+    lash line), brows, lips and cheeks.
     """
     skin = np.array(p.skin)
     ez = _EYE_DIR[2]
-    sockets = _soft(v, _EYE_DIR[1], ez - 0.01, 0.17, 0.1) + _soft(v, -_EYE_DIR[1], ez - 0.01, 0.17, 0.1)
-    if eyeballs:  # an ellipsoid head: all its relief is painted
-        shade = 1.0 - 0.42 * sockets
-        shade -= 0.22 * (_soft(v, 0.11, -0.1, 0.05, 0.12) + _soft(v, -0.11, -0.1, 0.05, 0.12))  # beside the nose
-        shade -= 0.25 * _soft(v, 0.0, -0.22, 0.09, 0.035) + 0.2 * _soft(v, 0.0, -0.43, 0.14, 0.04)  # under nose, lip
-        shade += 0.06 * _soft(v, 0.0, ez + 0.02, 0.06, 0.2)  # the bridge of the nose catches the light
-    else:  # a modelled face has its nose and lips; only the sockets' shadow under the brow is painted
-        shade = 1.0 - 0.25 * sockets
+    shade = 1.0 - 0.42 * (_soft(v, _EYE_DIR[1], ez - 0.01, 0.17, 0.1) + _soft(v, -_EYE_DIR[1], ez - 0.01, 0.17, 0.1))
+    shade -= 0.22 * (_soft(v, 0.11, -0.1, 0.05, 0.12) + _soft(v, -0.11, -0.1, 0.05, 0.12))  # beside the nose
+    shade -= 0.25 * _soft(v, 0.0, -0.22, 0.09, 0.035) + 0.2 * _soft(v, 0.0, -0.43, 0.14, 0.04)  # under nose, lip
+    shade += 0.06 * _soft(v, 0.0, ez + 0.02, 0.06, 0.2)  # the bridge of the nose catches the light
     dark = 1.0 - np.clip(shade, 0.45, 1.1)[:, None]
     out *= 1.0 - dark * [0.85, 1.0, 1.05]  # shadow on skin is warm: red light scatters under it
     # the sheen of skin where the face turns to the light (forehead, nose bridge, cheekbones): what gives
@@ -476,10 +471,9 @@ def _face(p: AvatarParams, v: np.ndarray, out: np.ndarray, eyeballs: bool = True
     out += (0.35 * np.clip(sheen, 0.0, 1.0))[:, None] * (1.0 - out) * (1.0 - np.mean(skin))
     for side in (1.0, -1.0):
         ey = side * _EYE_DIR[1]
-        if eyeballs:
-            out[_ellipse(v, ey, ez, 0.11, 0.045)] = [0.78, 0.75, 0.72]
-            out[_ellipse(v, ey, ez, 0.055, 0.045)] = np.array(p.eye_colour) * 0.7
-            out[_ellipse(v, ey, ez, 0.025, 0.025)] = [0.03, 0.03, 0.03]
+        out[_ellipse(v, ey, ez, 0.11, 0.045)] = [0.78, 0.75, 0.72]
+        out[_ellipse(v, ey, ez, 0.055, 0.045)] = np.array(p.eye_colour) * 0.7
+        out[_ellipse(v, ey, ez, 0.025, 0.025)] = [0.03, 0.03, 0.03]
         out[_ellipse(v, ey, ez + 0.04, 0.12, 0.016)] = [0.1, 0.07, 0.06]  # the lash line
         brow = np.array(p.hair_colour) * 0.6 if np.mean(p.hair_colour) < 0.6 else skin * 0.55
         out[_ellipse(v, side * 0.35, ez + 0.13, 0.15, 0.034)] = brow
@@ -862,7 +856,12 @@ def _mesh_sample(mesh, count: int, rng: np.random.Generator):
     tri = mesh.vertices[mesh.faces]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     density = _mesh_density(mesh)
-    face = np.repeat(np.arange(len(area)), _split(area * density, count))
+    # systematic sampling along the faces' cumulative weight: every face gets its share in expectation,
+    # small ones too (a largest-remainder split of counts below 1 would give them all to the largest
+    # faces and leave the finely meshed nose and lips bare)
+    cumulative = np.cumsum(area * density)
+    face = np.searchsorted(cumulative, (np.arange(count) + rng.random()) * (cumulative[-1] / count), side="right")
+    face = np.minimum(face, len(area) - 1)
     u, v = _plane_lattice(count, rng)  # consecutive points of R2 are far apart: a triangle's points spread
     root = np.sqrt(u)
     bary = np.column_stack([1.0 - root, root * (1.0 - v), root * v])
@@ -875,22 +874,47 @@ def _mesh_sample(mesh, count: int, rng: np.random.Generator):
     return points, normals, face, spacing, weights
 
 
-def _face_directions(points: np.ndarray, normals: np.ndarray, eyes: np.ndarray, mouth: np.ndarray) -> np.ndarray:
-    """Head points as the unit directions the painted face is drawn in, anchored on the real eyes and lips.
+def _anny_face(p: AvatarParams, points: np.ndarray, normals: np.ndarray, eyes: np.ndarray, mouth: np.ndarray):
+    """Skin colours of a modelled face's front, in metres around its own eyes and mouth.
 
-    :func:`_face` paints on an ellipsoid's front: eyes at ±``_EYE_DIR``, the lips' meeting line at
-    z ≈ −0.32. A linear map of the face's own coordinates puts those marks where Anny's eyeballs and mouth
-    are; points not on the front of the face get x = 0 (no paint).
+    The relief is the mesh's; what is painted is what a face's colour adds to it: the shadow of the eye
+    sockets under the brow, an arched brow 2.2–2.6 cm over each eye, the upper lid's lash line, lips
+    (the line between them darker), cheeks, and the sheen of forehead and cheekbones (stronger the
+    darker the skin: on dark skin the highlights carry a face's form).
     """
+    skin = np.array(p.skin)
+    out = skin * (1.0 + 0.035 * np.sin(points[:, 0] * 23 + 1.3) * np.sin(points[:, 1] * 19))[:, None]
     centre = eyes.mean(axis=0)
-    across = _EYE_DIR[1] / abs(eyes[0, 1] - centre[1])
-    down = (_EYE_DIR[2] + 0.32) / max(centre[2] - mouth[2], 1e-3)
-    v = np.zeros_like(points)
-    v[:, 1] = (points[:, 1] - centre[1]) * across
-    v[:, 2] = _EYE_DIR[2] + (points[:, 2] - centre[2]) * down
-    front = (points[:, 0] > centre[0] - 0.02) & (normals[:, 0] > 0.15)
-    v[front, 0] = 0.9
-    return v
+    front = (points[:, 0] > centre[0] - 0.02) & (normals[:, 0] > 0.1)
+    y, z = points[:, 1] - centre[1], points[:, 2] - centre[2]
+
+    def bump(cy: float, cz: float, ry: float, rz: float) -> np.ndarray:
+        return front * np.exp(-(((y - cy) / ry) ** 2 + ((z - cz) / rz) ** 2))
+
+    half = float(eyes[0, 1] - centre[1])  # half the distance between the eyes
+    sockets = bump(half, 0.002, 0.017, 0.011) + bump(-half, 0.002, 0.017, 0.011)
+    out *= (1.0 - 0.18 * np.clip(sockets, 0.0, 1.0))[:, None] ** [0.85, 1.0, 1.05]  # warm shadow
+    sheen = bump(0.0, 0.045, 0.035, 0.012) + bump(0.035, -0.022, 0.012, 0.008) + bump(-0.035, -0.022, 0.012, 0.008)
+    out += (0.3 * np.clip(sheen, 0.0, 1.0))[:, None] * (1.0 - out) * (1.0 - np.mean(skin))
+    brow = np.array(p.hair_colour) * 0.6 if np.mean(p.hair_colour) < 0.6 else skin * 0.55
+    for side in (1.0, -1.0):
+        across = (y - side * (half + 0.003)) / 0.014
+        arch = 0.022 + 0.004 * (1.0 - np.clip(across, -1.0, 1.0) ** 2)
+        out[front & (np.abs(across) < 1.0) & (np.abs(z - arch) < 0.0028)] = brow
+        lid = front & (np.abs(y - side * half) < 0.012) & (z > 0.004) & (z < 0.0065)
+        out[lid & (points[:, 0] > eyes[0, 0])] = [0.1, 0.07, 0.06]
+        cheek = bump(side * 0.036, -0.03, 0.015, 0.012)
+        out *= (1.0 - 0.05 * cheek)[:, None] * [1.0, 0.93, 0.93] + (0.05 * cheek)[:, None] * [1.0, 1.0, 1.0]
+    my, mz = y, points[:, 2] - mouth[2]
+    lips = (
+        front
+        & (np.abs(my) < 0.022 * np.sqrt(np.clip(1.0 - (mz / 0.009) ** 2, 0.0, 1.0)))
+        & (mz > -0.009)
+        & (mz < 0.006)
+    )
+    out[lips] = skin * [0.88, 0.64, 0.62]
+    out[lips & (np.abs(mz) < 0.0012)] = skin * [0.55, 0.36, 0.35]
+    return out
 
 
 def _eye_colours(p: AvatarParams, points: np.ndarray, eyes: np.ndarray) -> np.ndarray:
@@ -932,15 +956,12 @@ def _mesh_colours(p: AvatarParams, mesh, rest: np.ndarray, points, normals, face
             t = np.clip(rel @ axis / length**2, 0.0, 1.0)  # a limb's region runs a little past its joints
             angle = np.arctan2(rel @ depth, rel @ width)
             v = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(len(pts))])
+        elif name == "head":
+            colours[sel] = _anny_face(p, pts, nrm, mesh.eyes, mesh.mouth)
+            continue
         else:
-            t, v = np.zeros(len(pts)), _face_directions(pts, nrm, mesh.eyes, mesh.mouth)
-        part = _Part(name, pts[0], None, (1.0, 1.0, 1.0), name)
-        if name == "head":
-            out = np.array(p.skin) * (1.0 + 0.035 * np.sin(pts[:, 0] * 23 + 1.3) * np.sin(pts[:, 1] * 19))[:, None]
-            _face(p, v, out, eyeballs=False)
-            colours[sel] = out
-        else:
-            colours[sel] = _colours(p, part, pts, nrm, t, v)
+            t, v = np.zeros(len(pts)), np.zeros_like(pts)
+        colours[sel] = _colours(p, _Part(name, pts[0], None, (1.0, 1.0, 1.0), name), pts, nrm, t, v)
     return colours
 
 
