@@ -240,8 +240,22 @@ def _trilinear(pos, bucket, keys, values, h, lo, dims):
 
 
 def buckets(normals: np.ndarray) -> np.ndarray:
-    """Index (0..5) of the axis direction (+x, −x, +y, −y, +z, −z) nearest each normal."""
-    return np.argmax(normals @ _AXES.T, axis=1).astype(np.int64)
+    """Index (0..5) of the axis direction (+x, −x, +y, −y, +z, −z) nearest each normal (the first on a tie)."""
+    return _buckets(np.ascontiguousarray(normals, dtype=np.float64))
+
+
+@nb.njit(cache=True, parallel=True)
+def _buckets(normals):  # pragma: no cover - compiled; twin: argmax(normals @ _AXES.T) (tested)
+    out = np.empty(len(normals), dtype=np.int64)
+    for i in nb.prange(len(normals)):
+        best, value = 0, normals[i, 0]
+        for axis in range(3):
+            for sign in range(2):
+                v = normals[i, axis] if sign == 0 else -normals[i, axis]
+                if v > value:
+                    best, value = 2 * axis + sign, v
+        out[i] = best
+    return out
 
 
 @dataclass
@@ -334,10 +348,21 @@ def cell_keys(pos: np.ndarray, bucket: np.ndarray, h: float, lo: np.ndarray, dim
     The thin cells along the normal keep parallel faces a few centimetres apart (a trim on a wall's
     end, a shelf board over another) in different texels.
     """
-    axis = bucket // 2
-    step = np.full((len(pos), 3), h)
-    step[np.arange(len(pos)), axis] = DEPTH_M
-    return _encode(np.clip(np.floor((pos - lo) / step).astype(np.int64), 0, dims - 1), bucket, dims)
+    pos = np.ascontiguousarray(pos, dtype=np.float64)
+    return _cell_keys(pos, np.ascontiguousarray(bucket, dtype=np.int64), float(h), np.asarray(lo, np.float64),
+                      np.asarray(dims, np.int64))  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True)
+def _cell_keys(pos, bucket, h, lo, dims):  # pragma: no cover - compiled; twin: the numpy expression (tested)
+    out = np.empty(len(pos), dtype=np.int64)
+    for i in nb.prange(len(pos)):
+        axis = bucket[i] // 2
+        c0 = min(max(np.int64(math.floor((pos[i, 0] - lo[0]) / (DEPTH_M if axis == 0 else h))), 0), dims[0] - 1)
+        c1 = min(max(np.int64(math.floor((pos[i, 1] - lo[1]) / (DEPTH_M if axis == 1 else h))), 0), dims[1] - 1)
+        c2 = min(max(np.int64(math.floor((pos[i, 2] - lo[2]) / (DEPTH_M if axis == 2 else h))), 0), dims[2] - 1)
+        out[i] = ((c0 * dims[1] + c1) * dims[2] + c2) * 6 + bucket[i]
+    return out
 
 
 def _encode(cell: np.ndarray, bucket: np.ndarray, dims: np.ndarray) -> np.ndarray:

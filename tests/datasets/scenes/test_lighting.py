@@ -209,3 +209,23 @@ def test_lit_generation_is_identical_whatever_the_worker_count(tmp_path: Path) -
         trees.append({p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()})
     assert trees[0].keys() == trees[1].keys() and any(p.name == LIGHTS_FILE for p in trees[0])
     assert trees[0] == trees[1]
+
+
+def test_compiled_buckets_and_cell_keys_match_their_numpy_twins() -> None:
+    """The bake's compiled texel keys equal the plain numpy expressions, ties and exact axes included."""
+    from song.datasets.scenes import lighting as lit
+
+    rng = np.random.default_rng(0)
+    normals = rng.normal(size=(50_000, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[:600] = lit._AXES[rng.integers(0, 6, 600)]  # exactly on an axis
+    normals[600:700] = [np.sqrt(0.5), -np.sqrt(0.5), 0.0]  # a tie: the first axis wins, as argmax
+    bucket = lit.buckets(normals)
+    np.testing.assert_array_equal(bucket, np.argmax(normals @ lit._AXES.T, axis=1))
+    pos = rng.uniform(-3.0, 12.0, size=(50_000, 3))
+    pos[:500] = np.round(pos[:500], 1)  # on cell boundaries
+    lo, dims, h = np.array([-1.0137, -2.0137, -0.5137]), np.array([700, 800, 300]), 0.1
+    step = np.full((len(pos), 3), h)
+    step[np.arange(len(pos)), bucket // 2] = lit.DEPTH_M
+    cell = np.clip(np.floor((pos - lo) / step).astype(np.int64), 0, dims - 1)
+    np.testing.assert_array_equal(lit.cell_keys(pos, bucket, h, lo, dims), lit._encode(cell, bucket, dims))
