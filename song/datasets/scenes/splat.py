@@ -100,6 +100,13 @@ class _Samples:
         return cls(*(np.concatenate([getattr(i, f) for i in items]) for f in cls.__dataclass_fields__))
 
 
+def _face_counts(lu: np.ndarray, lv: np.ndarray, spacing: float) -> np.ndarray:
+    """How many samples :func:`_faces` lays on each rectangle (in its order)."""
+    su = np.minimum(spacing, np.maximum(lu / 3, spacing / 4))
+    sv = np.minimum(spacing, np.maximum(lv / 3, spacing / 4))
+    return np.maximum(1, np.round(lu / su)).astype(np.int64) * np.maximum(1, np.round(lv / sv)).astype(np.int64)
+
+
 def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples:
     """Jittered grid samples on F planar rectangles ``origin + u·eu + v·ev`` (u ∈ [0, lu], v ∈ [0, lv]).
 
@@ -230,30 +237,43 @@ def _round_parts(parts: list[Part], spacing: float, rng) -> _Samples:
 
 def _walls(d: Dressing, spacing: float, rng) -> _Samples:
     """Vertical faces along every wall polygon edge whose front is floor (free or under an object)."""
-    origins, eus, lens = [], [], []
+    origins, eus, lens, reach = [], [], [], []
     for poly in d.walls:
         for ring in (poly.exterior, *poly.interiors):
             pts = np.asarray(ring.coords)
             a, b = pts[:-1], pts[1:]
+            e = b - a
+            keep = np.linalg.norm(e, axis=1) > 1e-6
+            a, e = a[keep], e[keep]
+            # a right turn (the room on the right) is an inside corner of the room: both faces run on
+            # past it by half a spacing, behind the other face, so that where the two sheets' last
+            # jittered columns leave the corner line thinly covered the other's run-on fills it from
+            # behind (no dark seam down the corner); an outside corner gets no run-on (no fin)
+            turn = e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0]
+            inner = turn < -1e-9
             origins.append(a)
-            eus.append(b - a)
-            lens.append(np.linalg.norm(b - a, axis=1))
+            eus.append(e)
+            lens.append(np.linalg.norm(e, axis=1))
+            reach.append(np.column_stack([np.roll(inner, 1), inner]) * (0.5 * spacing))
     if not origins:
         return _Samples.concat([])
-    a, e, length = np.vstack(origins), np.vstack(eus), np.concatenate(lens)
-    keep = length > 1e-6
-    a, e, length = a[keep], e[keep], length[keep]
+    a, e, length, reach = np.vstack(origins), np.vstack(eus), np.concatenate(lens), np.vstack(reach)
     # the ring runs with the wall on its left, so the room is on its right: the face frame (eu, ez) with
     # eu along the edge has its normal eu × ez pointing right, into the room
     eu = np.column_stack([e / length[:, None], np.zeros(len(e))])
-    origin = np.column_stack([a, np.zeros(len(a))])
+    origin = np.column_stack([a, np.zeros(len(a))]) - eu * reach[:, :1]
     ez = np.tile([0.0, 0.0, 1.0], (len(a), 1))
     h = np.full(len(a), d.ceiling_height)
-    s = _faces(
-        origin, eu, ez, length, h, np.full(len(a), d.wall_material, object), np.zeros(len(a), bool), spacing, rng
-    )
+    run = length + reach.sum(axis=1)
+    s = _faces(origin, eu, ez, run, h, np.full(len(a), d.wall_material, object), np.zeros(len(a), bool), spacing, rng)
+    # which face each sample is on, and where along its edge (run-on samples lie outside [0, length])
+    face = np.repeat(np.arange(len(a)), _face_counts(run, h, spacing))
+    along = np.einsum("ij,ij->i", s.pos - np.column_stack([a, np.zeros(len(a))])[face], eu[face])
     grid = d.grid
-    front = s.pos[:, :2] + s.n[:, :2] * (0.5 * grid.resolution + 0.01)
+    # a run-on sample stands behind the next face: whether a room is in front is asked at the corner
+    at = np.column_stack([a, np.zeros(len(a))])[face] + eu[face] * np.clip(along, 0.0, length[face])[:, None]
+    front = np.where(((along < 0) | (along > length[face]))[:, None], at, s.pos)[:, :2]
+    front = front + s.n[:, :2] * (0.5 * grid.resolution + 0.01)
     rc = grid.to_cell(front)
     rows, cols = grid.shape
     inside = (rc[:, 0] >= 0) & (rc[:, 0] < rows) & (rc[:, 1] >= 0) & (rc[:, 1] < cols)

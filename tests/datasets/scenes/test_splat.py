@@ -53,8 +53,14 @@ def test_gaussians_lie_on_the_map(office: Path) -> None:
     dressing = build_dressing(
         package.semantic_map, grid, DressingHints.from_json(read_usd_dressing(office / USD_PROXY))
     )
-    rc, inside = _cells(grid, cloud.means[floor, :2].astype(np.float64))
-    assert inside.all() and dressing.floor_mask[rc[:, 0], rc[:, 1]].all()  # floor: over free or object cells
+    # floor: over free or object cells, to within the compressed PLY's quantisation of positions (a
+    # surfel laid a few µm inside a floor cell may come back a few µm over its edge)
+    xy = cloud.means[floor, :2].astype(np.float64)
+    on_floor = np.zeros(len(xy), bool)
+    for dx, dy in ((0, 0), (2e-3, 0), (-2e-3, 0), (0, 2e-3), (0, -2e-3)):
+        rc, inside = _cells(grid, xy + [dx, dy])
+        on_floor |= inside & dressing.floor_mask[rc[:, 0], rc[:, 1]]
+    assert on_floor.all()
     # every other surfel below head height (the map is a slice at body height; lintels span doorways)
     # sits on an obstacle: half a cell behind it, into the solid, is an occupied cell (walls are traced
     # from the cells and simplified within half a cell)
@@ -320,3 +326,40 @@ def test_instances_of_one_material_differ_and_one_instance_is_one_tone(office: P
     assert len(bases) == VARIANTS and material_of(variant("wood_medium", 0)).base == material_of("wood_medium").base
     tiles = [material_of(variant("tiles_grey", k)).scale for k in range(VARIANTS)]
     assert min(tiles) == 0.8 and max(tiles) == 1.25
+
+
+def test_inside_corners_have_no_seam(office: Path) -> None:
+    """Seen from 1 m, the line where two walls meet is covered as well as the walls around it.
+
+    Both walls' sheets run on past an inside corner behind the other, so where their last jittered
+    columns leave the corner line thin the other fills it (a dark seam of background showed there).
+    """
+    from song.render import render, robot_camera
+    from song.runtime.vision import scene_gaussians
+
+    package = load_scene_package(office)
+    dressing = build_dressing(
+        package.semantic_map, package.occupancy, DressingHints.from_json(read_usd_dressing(office / USD_PROXY))
+    )
+    corners = []
+    for poly in dressing.walls:
+        for ring in (poly.exterior, *poly.interiors):
+            pts = np.asarray(ring.coords)[:-1]
+            e_in, e_out = pts - np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0) - pts
+            turn = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+            for k in np.flatnonzero(turn < -1e-9):
+                a, b = -e_in[k] / np.linalg.norm(e_in[k]), e_out[k] / np.linalg.norm(e_out[k])
+                if abs(a @ b) < 0.1 and min(np.linalg.norm(e_in[k]), np.linalg.norm(e_out[k])) > 2.0:
+                    corners.append((pts[k], a + b))  # a right angle between two long walls: into the room
+    assert corners
+    gaussians = scene_gaussians(office / GAUSSIANS)
+    worst = []
+    for corner, into in corners[:4]:
+        into = into / np.linalg.norm(into)
+        eye = corner + into * 1.0
+        yaw = float(np.arctan2(-into[1], -into[0]))
+        out = render(gaussians, robot_camera(*eye, yaw, 1.2, 70.0, 320, 240), background=(0, 0, 0))
+        strip = out.alpha[60:180, 157:163]
+        if np.median(out.depth[60:180, 157:163]) < 1.6:  # the corner itself in view (no furniture before it)
+            worst.append(float(strip.min()))
+    assert worst and min(worst) >= 0.8, worst
