@@ -735,7 +735,8 @@ def _sample_part(p: AvatarParams, part: _Part, count: int, rng: np.random.Genera
     n = int(np.ceil(count / max(share, 1e-3) * 1.03))
     while True:  # one even lattice over the whole shell whose styled region holds ≥ count points
         pts, nrm, t, v = _sample(part, n, rng)
-        kept = np.flatnonzero(_hair_mask(p, v))
+        nape = (v[:, 0] < -0.3) & (v[:, 2] > -0.7)  # down the back of the head to the nape
+        kept = np.flatnonzero(_hair_mask(p, v) | nape)
         if len(kept) >= count:
             break
         n = int(np.ceil(n * 1.05))
@@ -851,11 +852,14 @@ def _mesh_density(mesh) -> np.ndarray:
     )
 
 
-def _mesh_sample(mesh, count: int, rng: np.random.Generator):
-    """``count`` evenly spread points on the mesh (head and hands denser): points, normals, faces, spacing, weights."""
+def _mesh_sample(mesh, count: int, rng: np.random.Generator, where: np.ndarray | None = None):
+    """``count`` evenly spread points on the mesh (head and hands denser), or on its faces ``where``.
+
+    Returns points, normals, faces, spacing and (V, 24)-interpolated weights.
+    """
     tri = mesh.vertices[mesh.faces]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    density = _mesh_density(mesh)
+    density = _mesh_density(mesh) * (1.0 if where is None else where)
     # systematic sampling along the faces' cumulative weight: every face gets its share in expectation,
     # small ones too (a largest-remainder split of counts below 1 would give them all to the largest
     # faces and leave the finely meshed nose and lips bare)
@@ -872,6 +876,32 @@ def _mesh_sample(mesh, count: int, rng: np.random.Generator):
     weights = np.einsum("nc,ncj->nj", bary, mesh.weights[corners])
     spacing = np.sqrt(float((area * density).sum()) / count / density[face])
     return points, normals, face, spacing, weights
+
+
+HAIR_THICKNESS_M = {"short": 0.008, "curly": 0.018, "bun": 0.006, "ponytail": 0.006}  # styles that hug the skull
+
+
+def _scalp_hair(p: AvatarParams, mesh, hc: np.ndarray, hr: np.ndarray, count: int, rng: np.random.Generator):
+    """``count`` points of hair lying on Anny's scalp, raised by the style's thickness along the normals.
+
+    The styled region is :func:`_hair_mask` of each point's direction in the hair shell (the hairline,
+    the open face); the head's own shape, not an ellipsoid, gives the hair its outline. Returns
+    points, normals, the position along the part (0) and the shell directions, as :func:`_sample`.
+    """
+    head = mesh.face_region == "head"
+    n = count
+    while True:  # an even sample of the head large enough that its styled region holds ≥ count points
+        pts, nrm, _, _, _ = _mesh_sample(mesh, n, rng, where=head)
+        v = (pts - hc) / hr
+        v /= np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
+        nape = (v[:, 0] < -0.3) & (v[:, 2] > -0.7)  # down the back of the head to the nape
+        kept = np.flatnonzero(_hair_mask(p, v) | nape)
+        if len(kept) >= count:
+            break
+        n = int(np.ceil(n * max(1.05, 1.02 * count / max(len(kept), 1))))
+    kept = np.sort(rng.choice(kept, count, replace=False))
+    raised = pts[kept] + nrm[kept] * HAIR_THICKNESS_M[p.hair] * p.height_m / 1.75
+    return raised, nrm[kept], np.zeros(count), v[kept]
 
 
 def _anny_face(p: AvatarParams, points: np.ndarray, normals: np.ndarray, eyes: np.ndarray, mouth: np.ndarray):
@@ -1009,7 +1039,10 @@ def _anny_surfels(p: AvatarParams, rest: np.ndarray, n: int, rng: np.random.Gene
     )
     regions.append(np.full(len(points), "body"))
     for part, count, a in zip(layers, counts[1:], layer_area, strict=True):
-        pts, nr, t, v = _sample_part(p, part, int(count), rng)
+        if part.name == "hair" and p.hair in HAIR_THICKNESS_M:
+            pts, nr, t, v = _scalp_hair(p, mesh, hc, hr, int(count), rng)
+        else:
+            pts, nr, t, v = _sample_part(p, part, int(count), rng)
         means.append(pts)
         nrm.append(nr)
         cols.append(_colours(p, part, pts, nr, t, v))
