@@ -38,7 +38,7 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import N_JOINTS, rest_joints
 from song.util import derive_rng
 
-GENERATOR_VERSION = 4
+GENERATOR_VERSION = 5
 SKIN_TONES = np.array(  # sRGB 0–1, light to deep (a spread of real skin reflectances)
     [
         [0.96, 0.84, 0.74],
