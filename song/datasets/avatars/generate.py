@@ -763,21 +763,30 @@ def _procedural_surfels(p: AvatarParams, rest: np.ndarray, n: int, rng: np.rando
     parts = _body_parts(p, rest)
     areas = np.array([_area(part) for part in parts])
     counts = _split(areas * np.array([part.density for part in parts]), n)
-    means, normals, colours, spacing, hanging = [], [], [], [], []
-    for part, count, area in zip(parts, counts, areas, strict=True):
-        points, normal, t, v = _sample_part(p, part, int(count), rng)
-        means.append(points)
-        normals.append(normal)
-        colours.append(_colours(p, part, points, normal, t, v))
-        spacing.append(np.full(len(points), np.sqrt(area / max(int(count), 1))))
-        hanging.append(np.full(len(points), part.region in ("skirt", "bag")))
-    regions = np.concatenate([np.full(int(count), part.region) for part, count in zip(parts, counts, strict=True)])
-    means, normals, colours, spacing, hanging = map(np.concatenate, (means, normals, colours, spacing, hanging))
+    means, normals, colours, spacing, hanging, regions = _part_surfels(
+        p, parts, counts, areas, lambda part, count: _sample_part(p, part, count, rng)
+    )
     _layer_colours(p, parts, regions, means, colours)
     means[:, 2] -= means[:, 2].min()  # soles on z = 0
     indices, weights = transfer_weights(means, rest, p.height_m)
     _hang_from_pelvis(p, rest, means, hanging, indices, weights)
     return _Surfels(means, normals, colours, spacing, indices, weights, p.body.body_radius_m, {})
+
+
+def _part_surfels(p: AvatarParams, parts: list[_Part], counts, areas, sample):
+    """Points, normals, colours, spacing, hanging flags and regions of ``parts`` (``sample(part, count)``)."""
+    means, normals, colours, spacing, hanging, regions = [], [], [], [], [], []
+    for part, count, area in zip(parts, counts, areas, strict=True):
+        points, normal, t, v = sample(part, int(count))
+        means.append(points)
+        normals.append(normal)
+        colours.append(_colours(p, part, points, normal, t, v))
+        spacing.append(np.full(len(points), np.sqrt(area / max(int(count), 1))))
+        hanging.append(np.full(len(points), part.region in ("skirt", "bag")))
+        regions.append(np.full(len(points), part.region))
+    if not parts:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0, bool), np.zeros(0, str)
+    return tuple(np.concatenate(x) for x in (means, normals, colours, spacing, hanging, regions))
 
 
 def _hang_from_pelvis(p, rest, means, hanging, indices, weights) -> None:
@@ -1029,27 +1038,15 @@ def _anny_surfels(p: AvatarParams, rest: np.ndarray, n: int, rng: np.random.Gene
     points, normals, face, spacing, dense = _mesh_sample(mesh, int(counts[0]), rng)
     dominant = dense.argmax(axis=1)
     colours = _mesh_colours(p, mesh, rest, points, normals, face, dominant)
-    means, nrm, cols, spc, hanging, regions = (
-        [points],
-        [normals],
-        [colours],
-        [spacing],
-        [np.zeros(len(points), bool)],
-        [],
-    )
-    regions.append(np.full(len(points), "body"))
-    for part, count, a in zip(layers, counts[1:], layer_area, strict=True):
+
+    def sample(part: _Part, count: int):
         if part.name == "hair" and p.hair in HAIR_THICKNESS_M:
-            pts, nr, t, v = _scalp_hair(p, mesh, hc, hr, int(count), rng)
-        else:
-            pts, nr, t, v = _sample_part(p, part, int(count), rng)
-        means.append(pts)
-        nrm.append(nr)
-        cols.append(_colours(p, part, pts, nr, t, v))
-        spc.append(np.full(len(pts), np.sqrt(a / max(int(count), 1))))
-        hanging.append(np.full(len(pts), part.region in ("skirt", "bag")))
-        regions.append(np.full(len(pts), part.region))
-    means, nrm, cols, spc, hanging, regions = map(np.concatenate, (means, nrm, cols, spc, hanging, regions))
+            return _scalp_hair(p, mesh, hc, hr, count, rng)
+        return _sample_part(p, part, count, rng)
+
+    body = (points, normals, colours, spacing, np.zeros(len(points), bool), np.full(len(points), "body"))
+    layered = _part_surfels(p, layers, counts[1:], layer_area, sample)
+    means, nrm, cols, spc, hanging, regions = (np.concatenate([x, y]) for x, y in zip(body, layered, strict=True))
     _layer_colours(p, layers, regions, means, cols)
     indices, weights = top_k(np.vstack([dense, np.zeros((len(means) - len(points), N_JOINTS))]))
     layered = np.arange(len(means)) >= len(points)
