@@ -128,12 +128,14 @@ _AGE_VALUES = np.array([-1.0 / 3.0, 0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
 
 @functools.cache
 def available() -> bool:
-    """Whether Anny (and torch and warp, which it needs) can be imported."""
-    try:
-        import anny  # noqa: F401
-    except Exception:  # noqa: BLE001 - any import failure means "use the procedural body"
-        return False
-    return True
+    """Whether Anny and what it needs (torch, NVIDIA warp) are installed.
+
+    Asked of the import system without importing them (torch alone takes ~2 s to import, and every
+    worker asks where its avatar pool lives); a broken install fails loudly when a pool is built.
+    """
+    from importlib.util import find_spec
+
+    return all(find_spec(name) is not None for name in ("anny", "torch", "warp", "roma"))
 
 
 def _joint_of_bone(label: str) -> str:
