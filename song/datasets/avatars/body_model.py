@@ -218,7 +218,7 @@ def phenotype(sex: str, age_years: float, z: dict[str, float]) -> dict[str, floa
 
 @dataclass
 class BodyMesh:
-    """An identity's body on SONG's rest skeleton (T-pose, x forward, y left, z up, soles on z = 0).
+    """An identity's body on SONG's rest skeleton (T-pose, x forward, y left, z up, soles at z ≈ 0).
 
     Attributes:
         vertices: (V, 3) metres.
