@@ -1106,6 +1106,13 @@ def generate_avatar(
     body = body or default_body()
     if body not in BODIES:
         raise ValueError(f"body={body!r}: expected one of {BODIES}")
+    if body == "anny":
+        from song.datasets.avatars.body_model import available
+
+        if not available():
+            raise ValueError(
+                "body='anny': Anny is not installed (pip install 'song[avatars]'), or use body='procedural'"
+            )
     p = params or sample_params(rng)
     rest = rest_joints(p.height_m)
     made = (_anny_surfels if body == "anny" else _procedural_surfels)(p, rest, n_gaussians, rng)

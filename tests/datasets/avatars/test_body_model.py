@@ -94,3 +94,5 @@ def test_procedural_body_is_the_fallback(monkeypatch) -> None:
     assert len(asset) == 6_000
     with pytest.raises(ValueError, match="body="):
         generate_avatar(derive_rng(1, "avatar", 0), "p", 6_000, body="smpl")
+    with pytest.raises(ValueError, match="Anny is not installed"):
+        generate_avatar(derive_rng(1, "avatar", 0), "p", 6_000, body="anny")
