@@ -35,7 +35,7 @@ from song.datasets.avatars.skinning import top_k, transfer_weights
 from song.datasets.scenes.ply import SH_C0, GaussianCloud
 from song.geometry.rotations import matrix_to_quat
 from song.geometry.skeleton import JOINT_INDEX as J
-from song.geometry.skeleton import N_JOINTS, rest_joints
+from song.geometry.skeleton import JOINT_NAMES, N_JOINTS, rest_joints
 from song.util import derive_rng
 
 GENERATOR_VERSION = 5
@@ -727,6 +727,11 @@ def _layer_colours(p: AvatarParams, parts: list[_Part], regions: np.ndarray, mea
         colours[sunk] = colours[body[cKDTree(means[body]).query(means[sunk])[1]]]
 
 
+def _hair_styled(p: AvatarParams, v: np.ndarray) -> np.ndarray:
+    """Where a hair layer's surfels go (``v``: unit directions in the shell): the style and the nape."""
+    return _hair_mask(p, v) | ((v[:, 0] < -0.3) & (v[:, 2] > -0.7))
+
+
 def _sample_part(p: AvatarParams, part: _Part, count: int, rng: np.random.Generator):
     """``count`` surface points of a part; the hair shell keeps only its styled region (oversampled)."""
     if part.name != "hair":
@@ -735,8 +740,7 @@ def _sample_part(p: AvatarParams, part: _Part, count: int, rng: np.random.Genera
     n = int(np.ceil(count / max(share, 1e-3) * 1.03))
     while True:  # one even lattice over the whole shell whose styled region holds ≥ count points
         pts, nrm, t, v = _sample(part, n, rng)
-        nape = (v[:, 0] < -0.3) & (v[:, 2] > -0.7)  # down the back of the head to the nape
-        kept = np.flatnonzero(_hair_mask(p, v) | nape)
+        kept = np.flatnonzero(_hair_styled(p, v))
         if len(kept) >= count:
             break
         n = int(np.ceil(n * 1.05))
@@ -861,20 +865,25 @@ def _mesh_density(mesh) -> np.ndarray:
     )
 
 
+def _weighted_areas(mesh) -> np.ndarray:
+    """Each face's area times its :func:`_mesh_density`: its share of the body's Gaussians."""
+    tri = mesh.vertices[mesh.faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return area * _mesh_density(mesh)
+
+
 def _mesh_sample(mesh, count: int, rng: np.random.Generator, where: np.ndarray | None = None):
     """``count`` evenly spread points on the mesh (head and hands denser), or on its faces ``where``.
 
     Returns points, normals, faces, spacing and (V, 24)-interpolated weights.
     """
-    tri = mesh.vertices[mesh.faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    density = _mesh_density(mesh) * (1.0 if where is None else where)
+    weight = _weighted_areas(mesh) * (1.0 if where is None else where)
     # systematic sampling along the faces' cumulative weight: every face gets its share in expectation,
     # small ones too (a largest-remainder split of counts below 1 would give them all to the largest
     # faces and leave the finely meshed nose and lips bare)
-    cumulative = np.cumsum(area * density)
+    cumulative = np.cumsum(weight)
     face = np.searchsorted(cumulative, (np.arange(count) + rng.random()) * (cumulative[-1] / count), side="right")
-    face = np.minimum(face, len(area) - 1)
+    face = np.minimum(face, len(weight) - 1)
     u, v = _plane_lattice(count, rng)  # consecutive points of R2 are far apart: a triangle's points spread
     root = np.sqrt(u)
     bary = np.column_stack([1.0 - root, root * (1.0 - v), root * v])
@@ -883,7 +892,8 @@ def _mesh_sample(mesh, count: int, rng: np.random.Generator, where: np.ndarray |
     normals = np.einsum("nc,ncd->nd", bary, mesh.normals[corners])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     weights = np.einsum("nc,ncj->nj", bary, mesh.weights[corners])
-    spacing = np.sqrt(float((area * density).sum()) / count / density[face])
+    density = _mesh_density(mesh)
+    spacing = np.sqrt(float(weight.sum()) / count / density[face])
     return points, normals, face, spacing, weights
 
 
@@ -903,8 +913,7 @@ def _scalp_hair(p: AvatarParams, mesh, hc: np.ndarray, hr: np.ndarray, count: in
         pts, nrm, _, _, _ = _mesh_sample(mesh, n, rng, where=head)
         v = (pts - hc) / hr
         v /= np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
-        nape = (v[:, 0] < -0.3) & (v[:, 2] > -0.7)  # down the back of the head to the nape
-        kept = np.flatnonzero(_hair_mask(p, v) | nape)
+        kept = np.flatnonzero(_hair_styled(p, v))
         if len(kept) >= count:
             break
         n = int(np.ceil(n * max(1.05, 1.02 * count / max(len(kept), 1))))
@@ -969,8 +978,6 @@ def _eye_colours(p: AvatarParams, points: np.ndarray, eyes: np.ndarray) -> np.nd
 
 def _mesh_colours(p: AvatarParams, mesh, rest: np.ndarray, points, normals, face, dominant) -> np.ndarray:
     """Per-point RGB on the Anny body: clothing, skin, shoes and face by the region each point skins to."""
-    from song.geometry.skeleton import JOINT_NAMES
-
     region = np.array([_MESH_REGION[JOINT_NAMES[j]] for j in range(N_JOINTS)])[dominant]
     # the neckline: a crew neck, lower in front, whatever joint the points near it skin to
     s = p.height_m / 1.75
@@ -1006,7 +1013,7 @@ def _mesh_colours(p: AvatarParams, mesh, rest: np.ndarray, points, normals, face
 
 def _head_shell(mesh, s: float) -> tuple[np.ndarray, np.ndarray]:
     """An ellipsoid around Anny's skull (the hair's shell): back of the head, forehead, crown, temples."""
-    head = np.unique(mesh.faces[np.isin(mesh.face_region, ("head",))])
+    head = np.unique(mesh.faces[mesh.face_region == "head"])
     eye_z = float(mesh.eyes[:, 2].mean())
     skull = mesh.vertices[head]
     skull = skull[skull[:, 2] > eye_z - 0.01 * s]
@@ -1030,11 +1037,8 @@ def _anny_surfels(p: AvatarParams, rest: np.ndarray, n: int, rng: np.random.Gene
     hip_band = np.abs(mesh.vertices[:, 2] - (rest[J["pelvis"], 2] + 0.03 * s)) < 0.02 * s
     waist_half = float(np.abs(mesh.vertices[hip_band, 1]).max())
     layers = _layer_parts(p, rest, hc, hr, waist_half / p.girth, eyes=mesh.eyes)
-    tri = mesh.vertices[mesh.faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    density = _mesh_density(mesh)
     layer_area = np.array([_area(part) for part in layers])
-    counts = _split(np.concatenate([[float((area * density).sum())], layer_area * [q.density for q in layers]]), n)
+    counts = _split(np.concatenate([[float(_weighted_areas(mesh).sum())], layer_area * [q.density for q in layers]]), n)
     points, normals, face, spacing, dense = _mesh_sample(mesh, int(counts[0]), rng)
     dominant = dense.argmax(axis=1)
     colours = _mesh_colours(p, mesh, rest, points, normals, face, dominant)

@@ -100,11 +100,11 @@ class _Samples:
         return cls(*(np.concatenate([getattr(i, f) for i in items]) for f in cls.__dataclass_fields__))
 
 
-def _face_counts(lu: np.ndarray, lv: np.ndarray, spacing: float) -> np.ndarray:
-    """How many samples :func:`_faces` lays on each rectangle (in its order)."""
+def _face_grid(lu: np.ndarray, lv: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Columns and rows of samples :func:`_faces` lays on each rectangle (in its order)."""
     su = np.minimum(spacing, np.maximum(lu / 3, spacing / 4))
     sv = np.minimum(spacing, np.maximum(lv / 3, spacing / 4))
-    return np.maximum(1, np.round(lu / su)).astype(np.int64) * np.maximum(1, np.round(lv / sv)).astype(np.int64)
+    return np.maximum(1, np.round(lu / su)).astype(np.int64), np.maximum(1, np.round(lv / sv)).astype(np.int64)
 
 
 def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples:
@@ -124,10 +124,7 @@ def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples
     f = len(lu)
     if f == 0:
         return _Samples.concat([])
-    su = np.minimum(spacing, np.maximum(lu / 3, spacing / 4))
-    sv = np.minimum(spacing, np.maximum(lv / 3, spacing / 4))
-    nu = np.maximum(1, np.round(lu / su)).astype(np.int64)
-    nv = np.maximum(1, np.round(lv / sv)).astype(np.int64)
+    nu, nv = _face_grid(lu, lv, spacing)
     counts = nu * nv
     face = np.repeat(np.arange(f), counts)
     k = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
@@ -267,7 +264,7 @@ def _walls(d: Dressing, spacing: float, rng) -> _Samples:
     run = length + reach.sum(axis=1)
     s = _faces(origin, eu, ez, run, h, np.full(len(a), d.wall_material, object), np.zeros(len(a), bool), spacing, rng)
     # which face each sample is on, and where along its edge (run-on samples lie outside [0, length])
-    face = np.repeat(np.arange(len(a)), _face_counts(run, h, spacing))
+    face = np.repeat(np.arange(len(a)), np.prod(_face_grid(run, h, spacing), axis=0))
     along = np.einsum("ij,ij->i", s.pos - np.column_stack([a, np.zeros(len(a))])[face], eu[face])
     grid = d.grid
     # a run-on sample stands behind the next face: whether a room is in front is asked at the corner
