@@ -34,7 +34,7 @@ EPISODES ?= 120
 
 demo: setup
 	# the shipped samples carry geometry only; their Gaussian scenes are synthesised here (~2 s each)
-	$(SONG) scenes splat $(SAMPLES) --out $(SCENES)
+	$(SONG) scenes splat $(SAMPLES) --out $(SCENES) --force
 	$(SONG) scenes check $(SCENES)
 	$(SONG) synth --scenes $(SCENES) --out $(RUN) --workers 2
 	$(SONG) grade --run $(RUN) --episodes $(EPISODES) --workers 2
