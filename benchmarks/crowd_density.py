@@ -1,13 +1,13 @@
 """Crowd planning cost against density in a generated lobby, one JSON object.
 
-.venv/bin/python benchmarks/crowd_density.py [--counts 8 16 32 64]
+.venv/bin/python benchmarks/crowd_density.py [--counts 8 16 32 64] [--set crowd.KEY=VALUE ...]
 
 The scene: the procedural lobby ``lobby_0002`` (seed 7, the one ``benchmarks/render.py`` uses; its
 navmesh at r = 0.25 m is reported). For each count N we draw N synthetic single-leg intents on the
 mesh (seeded): starts and goals at least 0.8 m from each other's, paths 5–25 m long, speeds uniform
 0.5–1.0 m/s (the paper's profile), departures uniform over the first 20 s. The crowd planner
 (:func:`song.pipeline.crowd.simulate.plan_crowd`) runs on them with the default crowd settings; we
-report wall seconds, the simulated seconds, the pedestrians by outcome (arrived, gave up, still under
+report wall and CPU seconds (the process's, all threads), the simulated seconds, the pedestrians by outcome (arrived, gave up, still under
 way at the end) and the cost ratio of the largest count to the smallest. Beside it, the cost per
 pedestrian-second simulated (everyone is simulated from the first frame to the last) and its ratio:
 near 1 when the planner scales linearly, whatever the jams do to the length of the run.
@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import emit  # noqa: E402
 
-from song.config import SongConfig  # noqa: E402
+from song.config import SongConfig, parse_assignments  # noqa: E402
 from song.datasets.run.intents import Intent, Provenance  # noqa: E402
 from song.datasets.scenes import load_scene_package  # noqa: E402
 from song.datasets.scenes.generate import generate_scene  # noqa: E402
@@ -102,39 +102,50 @@ def give_up_dither(plan, intents, mesh) -> dict:
             round(max(stuck_s), 1), "give_up_walked_m_median": round(float(np.median(walked)), 1)}  # fmt: skip
 
 
-def timed(intents, mesh, config) -> tuple[float, dict]:
-    """Wall seconds of one crowd plan, and its outcome counts (and the give-up dither)."""
+def timed(intents, mesh, config) -> tuple[float, float, dict]:
+    """Wall and CPU seconds of one crowd plan, and its outcome counts (and the give-up dither)."""
     cfg = config.crowd
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "lobby", "crowd"))
-    seconds = time.perf_counter() - start
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
     counts = {kind: sum(v["status"] == kind for v in plan.status.values()) for kind in OUTCOMES}
     simulated = round((plan.xy.shape[1] - 1) / plan.fps, 1)
-    return seconds, {"simulated_s": simulated, **counts, **give_up_dither(plan, intents, mesh)}
+    return seconds, cpu, {"simulated_s": simulated, **counts, **give_up_dither(plan, intents, mesh)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--counts", type=int, nargs="+", default=[8, 16, 32, 64])
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="config override (as `song --set`)"
+    )
     args = parser.parse_args()
-    config = SongConfig()
+    config = SongConfig(**parse_assignments(args.set))
     with tempfile.TemporaryDirectory() as tmp:
         package = load_scene_package(generate_scene("lobby_0002", "lobby", 7, Path(tmp), splat=False))
     mesh = scene_navmesh(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
     timed(synthetic_intents(mesh, 4, 99), mesh, config)  # first-use compilation outside the timings
     rows = []
     for count in args.counts:
-        seconds, outcomes = timed(synthetic_intents(mesh, count, count), mesh, config)
+        seconds, cpu, outcomes = timed(synthetic_intents(mesh, count, count), mesh, config)
         per = seconds / (count * outcomes["simulated_s"]) * 1000.0  # everyone is simulated for the whole run
         rows.append(
-            {"pedestrians": count, "seconds": round(seconds, 2), "ms_per_pedestrian_s": round(per, 3), **outcomes}
+            {
+                "pedestrians": count,
+                "seconds": round(seconds, 2),
+                "cpu_seconds": round(cpu, 2),
+                "ms_per_pedestrian_s": round(per, 3),
+                **outcomes,
+            }
         )
     emit(
         {
             "scene": "lobby_0002 (seed 7)",
             "navmesh_m2": round(mesh.area, 1),
             "runs": rows,
+            "settings": args.set,
             "cost_ratio_largest_to_smallest": round(rows[-1]["seconds"] / rows[0]["seconds"], 1),
+            "cpu_ratio_largest_to_smallest": round(rows[-1]["cpu_seconds"] / rows[0]["cpu_seconds"], 1),
             "per_pedestrian_s_ratio_largest_to_smallest": round(
                 rows[-1]["ms_per_pedestrian_s"] / rows[0]["ms_per_pedestrian_s"], 2
             ),

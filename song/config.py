@@ -103,6 +103,10 @@ class CrowdConfig(_Section):
     stall_time_s: float = Field(2.0, gt=0.0, description="no progress for this long = stalled, s")
     start_jitter_m: float = Field(0.03, ge=0.0, le=0.2, description="start jitter breaking symmetry, m")
     contour_error_m: float = Field(0.05, ge=0.0, description="contour simplification tolerance, m")
+    queue_at_passages: bool = Field(
+        False,
+        description="wait clear of a passage too narrow to pass in while it is used the other way (docs/crowd.md)",
+    )
 
 
 class MotionConfig(_Section):

@@ -55,6 +55,7 @@ from song.pipeline.crowd._crowd_kernel import (
     walking,
 )
 from song.pipeline.crowd.avoidance import LocalAvoidance
+from song.pipeline.crowd.passages import Queues, find_passages
 
 ARRIVE_M = 0.05  # within this of the goal a pedestrian has arrived (it then stands there)
 CLOSE_ENOUGH_M = 0.5  # a pedestrian stalled this near its goal (a step) stops where it is: it has arrived
@@ -404,16 +405,26 @@ def _wait_for_passers(w: _Walkers, moving: np.ndarray, frame: int, cfg: CrowdCon
     )  # fmt: skip
 
 
-def _step_frame(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.ndarray, cfg: CrowdConfig, frame: int):
+def _step_frame(
+    w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.ndarray, cfg: CrowdConfig, frame: int,
+    queues: Queues | None,
+):  # fmt: skip
     dt, r = 1.0 / cfg.fps, cfg.agent_radius_m
     if not moving.any():
         w.vel = np.zeros_like(w.vel)
         return
     _update_corners(w, mesh, moving, frame % CHECK_EVERY == 0)
+    cur, nxt, has_next, goal = w.cur, w.nxt, w.has_next, w.goal
+    if queues is not None and (queues.passage >= 0).any():
+        wait = queues.waiting & moving  # those waiting for a passage head for their places
+        cur, nxt, goal = (np.where(wait[:, None], queues.hold, a) for a in (cur, nxt, goal))
+        has_next = has_next & ~wait
+        # waiting, or following others through, is not being stuck (for a while)
+        w.last_progress[queues.patient(frame * dt) & moving] = frame * dt
     # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
     reach = max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M)
     rows, *inputs = avoidance_inputs(
-        w.pos, w.vel, w.cur, w.nxt, w.has_next, w.goal, w.speed, moving, r, dt, reach, frame, w.last_progress,
+        w.pos, w.vel, cur, nxt, has_next, goal, w.speed, moving, r, dt, reach, frame, w.last_progress,
     )  # fmt: skip
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
@@ -530,6 +541,13 @@ def _replan_around_standing(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarr
     return (path if path is not None else w.paths[k][w.corner[k] :]), reason
 
 
+def _queue(w: _Walkers, queues: Queues, moving: np.ndarray, t: float) -> None:
+    """Ask for the passages ahead, grant them (:class:`Queues`); one granted its passage walks on from here."""
+    ahead = [w.paths[k][w.corner[k] :] for k in range(len(w.pos))]
+    for k in queues.update(w.pos, ahead, moving, t):
+        w.best[k], w.last_progress[k] = _remaining(w, np.array([k]))[0], t
+
+
 def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfig):
     """Run the crowd until everyone has finished or time is up: (xy (N, F, 2), yaw (N, F), speed (N, F)).
 
@@ -539,6 +557,7 @@ def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfi
     xy, yaw, speed = np.zeros((n, frames, 2)), np.zeros((n, frames)), np.zeros((n, frames))
     xy[:, 0], yaw[:, 0] = w.pos, w.heading
     turn = FACE_TURN_RATE / cfg.fps
+    queues = Queues(find_passages(mesh, cfg.agent_radius_m), mesh, n) if cfg.queue_at_passages else None
     frame = 0
     while frame < frames - 1 and not w.arrived.all():
         frame += 1
@@ -546,7 +565,9 @@ def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfi
         moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
         _wait_for_passers(w, moving, frame, cfg)
         w.face[moving] = np.nan  # it has left its object
-        _step_frame(w, mesh, avoid, moving, cfg, frame)
+        if queues is not None and frame % CHECK_EVERY == 0:
+            _queue(w, queues, moving, t)
+        _step_frame(w, mesh, avoid, moving, cfg, frame, queues)
         _check_progress(w, mesh, moving, t, cfg)
         record_frame(w.pos, w.vel, w.smooth, w.heading, w.face, turn, xy, yaw, speed, frame)
     return xy[:, : frame + 1], yaw[:, : frame + 1], speed[:, : frame + 1]
