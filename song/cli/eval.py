@@ -71,6 +71,11 @@ def eval_command(
     no_avatars: bool = typer.Option(
         False, "--no-avatars", help="the avatar-free ablation: the same episodes without pedestrians (unofficial)"
     ),
+    reactive: bool = typer.Option(
+        False,
+        "--reactive-pedestrians",
+        help="pedestrians near the robot avoid it (unofficial; also --set crowd.react_to_robot=true)",
+    ),
 ) -> None:
     """Run policies on every episode; write per-episode Parquet and the paper's metric table.
 
@@ -81,6 +86,7 @@ def eval_command(
     """
     from song.config import parse_assignments, read_config_mapping
     from song.datasets.bench import open_benchmark  # imported here: `--help` stays fast
+    from song.errors import ConfigError
     from song.runtime.evaluate import iter_eval, make_setup, results_in, write_results
     from song.runtime.metrics import markdown_table
     from song.runtime.params import apply_overrides
@@ -89,6 +95,14 @@ def eval_command(
     requested = read_config_mapping(config) if config else {}
     for section, values in parse_assignments(sets or []).items():
         requested[section] = {**requested.get(section, {}), **values} if isinstance(values, dict) else values
+    crowd = requested.get("crowd")
+    if isinstance(crowd, dict) and "react_to_robot" in crowd:  # a mode of the run, not a release parameter
+        value = crowd.pop("react_to_robot")
+        if not isinstance(value, bool):
+            raise ConfigError(str(config or "--set"), "crowd.react_to_robot", f"expected true or false, got {value!r}")
+        reactive = reactive or value
+        if not crowd:
+            requested.pop("crowd")
     params, changed = apply_overrides(release.params, requested, override, str(config or "--set"))
     for key, (old, new) in changed.items():
         err_console.print(f"[yellow]override[/yellow] {key}: {old} → {new} (results marked unofficial)")
@@ -107,8 +121,9 @@ def eval_command(
     table = {}
     for name in policy:
         setup = make_setup(
-            release, name, sensors, params, changed, camera, step_timeout, allow_modified, isolate, no_avatars
-        )
+            release, name, sensors, params, changed, camera, step_timeout, allow_modified, isolate, no_avatars,
+            reactive,
+        )  # fmt: skip
         results = []
         columns = (TextColumn(f"{name:>10}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
         with Progress(*columns, console=console) as progress:

@@ -25,7 +25,7 @@ from song.errors import MissingDependencyError
 from song.runtime.ablation import without_avatars
 from song.runtime.avatars import make_collider
 from song.runtime.guard import PolicyFailure, as_command
-from song.runtime.loop import EpisodeRunner
+from song.runtime.loop import EpisodeRunner, reactive_setup
 from song.runtime.sensors import SensorSuite, to_gym_space
 
 ENV_ID = f"song/SongNav-v{schema_major(SCHEMA_VERSION)}"
@@ -54,6 +54,8 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         sensor_options: per-sensor keyword options.
         allow_modified: use a release edited since export.
         no_avatars: the avatar-free ablation: episodes without pedestrians (neither rendered nor colliding).
+        reactive: reactive pedestrians: those near the robot avoid it (:mod:`song.runtime.reactive`; an
+            option, not the official replay protocol).
         resolution: (width, height) of the camera sensors (default: the release's, 960×540).
         render_backend: the renderer of the camera sensors (``auto``, ``numba``, ``gsplat``, ...).
         render_mode: ``"rgb_array"``: :meth:`render` returns the first-person RGB | depth | top-down map
@@ -75,6 +77,7 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         sensor_options: dict[str, dict] | None = None,
         allow_modified: bool = False,
         no_avatars: bool = False,
+        reactive: bool = False,
         resolution: tuple[int, int] | None = None,
         render_backend: str = "auto",
         render_mode: str | None = None,
@@ -108,6 +111,7 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         self.observation_space = to_gym_space(self.sensors.space())
         self.runner: EpisodeRunner | None = None
         self.no_avatars = no_avatars
+        self.reactive = reactive
 
     def render(self):
         """The current view as ``song viz pov`` draws it: RGB | depth | top-down map (``rgb_array``)."""
@@ -141,7 +145,11 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         episode = dataclasses.replace(self.bench.episode(episode_id), params=self.params)
         if self.no_avatars:
             episode = without_avatars(episode)
-        self.runner = EpisodeRunner(episode, make_collider(episode), self.sensors)
+        if self.reactive:
+            episode, collider, crowd = reactive_setup(episode)
+            self.runner = EpisodeRunner(episode, collider, self.sensors, crowd)
+        else:
+            self.runner = EpisodeRunner(episode, make_collider(episode), self.sensors)
 
     def step(self, action):
         """Apply [v, ω]; reward = progress toward the goal, ±10 at a success / collision end.

@@ -27,13 +27,14 @@ from song.runtime.ablation import without_avatars
 from song.runtime.avatars import make_collider
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.isolate import IsolatedPolicy
-from song.runtime.loop import EpisodeResult, run_episode
+from song.runtime.loop import EpisodeResult, reactive_setup, run_episode
 from song.runtime.metrics import aggregate, markdown_table
 from song.runtime.policies import load_policy, policy_info, policy_sensors
 from song.runtime.sensors import SensorSuite, parse_sensor_names
 from song.util import write_bytes_atomic, write_json_atomic, write_text_atomic
 
 ABLATION_SUFFIX = " (no avatars)"  # how an avatar-free ablation's rows are labelled beside their policy's
+REACTIVE_SUFFIX = " (reactive pedestrians)"  # and the rows of a run with reactive pedestrians
 RESULTS_SCHEMA = pa.schema(
     [
         ("episode_id", pa.string()),
@@ -73,6 +74,8 @@ class EvalSetup:
         no_avatars: the avatar-free ablation: the same episodes without pedestrians (neither rendered
             nor colliding; results are not official).
         policy_info: how the policy is driven (its kind, and a waypoint policy's rate and tracker).
+        reactive: pedestrians near the robot avoid it (:mod:`song.runtime.reactive`): not a replay, so
+            not the official protocol; results record the mode.
     """
 
     policy: str
@@ -84,11 +87,12 @@ class EvalSetup:
     isolate: bool = False
     no_avatars: bool = False
     policy_info: dict[str, Any] = field(default_factory=dict)
+    reactive: bool = False
 
     @property
     def label(self) -> str:
-        """The name results are filed under: the policy, with `` (no avatars)`` for the ablation."""
-        return self.policy + (ABLATION_SUFFIX if self.no_avatars else "")
+        """The name results are filed under: the policy, marked for the ablation and for reactive pedestrians."""
+        return self.policy + (ABLATION_SUFFIX if self.no_avatars else "") + (REACTIVE_SUFFIX if self.reactive else "")
 
 
 def make_setup(
@@ -102,6 +106,7 @@ def make_setup(
     allow_modified: bool = False,
     isolate: bool = False,
     no_avatars: bool = False,
+    reactive: bool = False,
 ) -> EvalSetup:
     """The setup of one policy; a release that no longer matches its fingerprint is refused first.
 
@@ -116,6 +121,7 @@ def make_setup(
         allow_modified: run on a release that fails :attr:`Benchmark.integrity` (results unofficial).
         isolate: run the policy in a process of its own; its code never runs in this one.
         no_avatars: run the avatar-free ablation (:func:`song.runtime.ablation.without_avatars`).
+        reactive: pedestrians near the robot avoid it (:mod:`song.runtime.reactive`; not official).
     """
     bench.require_intact(allow_modified)
     if isolate:  # the policy's code (its module too) runs only in its own process
@@ -133,7 +139,7 @@ def make_setup(
     overrides = dict(overrides or {})
     if model != bench.params.camera.model:  # another sensor than the release's: not the official protocol
         overrides["camera.model"] = [bench.params.camera.model, model]
-    return EvalSetup(policy, names, params, overrides, options, step_timeout_s, isolate, no_avatars, info)
+    return EvalSetup(policy, names, params, overrides, options, step_timeout_s, isolate, no_avatars, info, reactive)
 
 
 @dataclass(frozen=True)
@@ -158,6 +164,9 @@ def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  
     else:
         policy, limit = load_policy(setup.policy), setup.step_timeout_s  # first: it may register its sensors
     sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
+    if setup.reactive:
+        episode, collider, crowd = reactive_setup(episode)
+        return run_episode(episode, policy, collider, sensors, step_timeout_s=limit, crowd=crowd)
     return run_episode(episode, policy, make_collider(episode), sensors, step_timeout_s=limit)
 
 
@@ -239,8 +248,9 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
         "privileged": sensors.privileged,  # any sensor a real robot could not have (other agents' true states)
         "params": setup.params.to_json(),
         "overrides": setup.overrides,
-        "official": not setup.overrides and not bench.integrity and not setup.no_avatars,
+        "official": not setup.overrides and not bench.integrity and not setup.no_avatars and not setup.reactive,
         "ablation": "no_avatars" if setup.no_avatars else None,
+        "pedestrians": "reactive" if setup.reactive else "replay",
         "release_check": bench.integrity or "ok",  # the fingerprint, info.json and the tables, checked at open
         "step_timeout_s": setup.step_timeout_s,
         "policy_process": "isolated" if setup.isolate else "in-process",
@@ -251,6 +261,7 @@ def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult],
     """Write ``<policy>.parquet``, ``<policy>.json`` and ``<policy>.md`` into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     safe = setup.policy.replace(":", "_").replace("/", "_") + ("-no-avatars" if setup.no_avatars else "")
+    safe += "-reactive" if setup.reactive else ""
     about = provenance(bench, setup)
     table = results_table(results, setup.label)
     table = table.replace_schema_metadata({b"song.eval": json.dumps(about, sort_keys=True).encode()})
@@ -264,7 +275,7 @@ def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult],
 
 
 def results_in(out_dir: Path, latest: dict[str, dict] | None = None) -> dict[str, dict]:
-    """The metric rows of every results file in ``out_dir`` (plus ``latest``), each ablation after its main row.
+    """The metric rows of every results file in ``out_dir`` (plus ``latest``), each variant after its main row.
 
     A file that is not a results summary is skipped; ``latest`` wins over a file of the same label.
     """
@@ -273,6 +284,7 @@ def results_in(out_dir: Path, latest: dict[str, dict] | None = None) -> dict[str
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
             label = data["policy"] + (ABLATION_SUFFIX if data.get("ablation") == "no_avatars" else "")
+            label += REACTIVE_SUFFIX if data.get("pedestrians") == "reactive" else ""
             rows[label] = {  # strict JSON stores a non-finite metric as null
                 d: {k: float("nan") if v is None else v for k, v in row.items()} for d, row in data["metrics"].items()
             }
@@ -283,6 +295,9 @@ def results_in(out_dir: Path, latest: dict[str, dict] | None = None) -> dict[str
     ordered = {
         label: dict(sorted(by.items(), key=lambda kv: order.get(kv[0], len(order)))) for label, by in rows.items()
     }
-    return dict(
-        sorted(ordered.items(), key=lambda kv: (kv[0].removesuffix(ABLATION_SUFFIX), kv[0].endswith(ABLATION_SUFFIX)))
-    )
+
+    def key(label: str) -> tuple[str, bool, bool]:
+        base = label.removesuffix(REACTIVE_SUFFIX)
+        return base.removesuffix(ABLATION_SUFFIX), base.endswith(ABLATION_SUFFIX), label.endswith(REACTIVE_SUFFIX)
+
+    return dict(sorted(ordered.items(), key=lambda kv: key(kv[0])))

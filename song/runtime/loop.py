@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 
 from song.datasets.bench.types import Episode, pedestrian_states
-from song.runtime.avatars import AvatarCollider
+from song.runtime.avatars import AvatarCollider, make_collider
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S, PolicyFailure, as_command, call_policy, policy_view
 from song.runtime.metrics import EpisodeMetrics, episode_metrics
 from song.runtime.policies import Policy, policy_sensors
+from song.runtime.reactive import ReactiveCrowd
 from song.runtime.robot import Pose, clamp_command, integrate
 from song.runtime.sensors import RobotView, SensorSuite
 from song.runtime.world import StaticWorld
@@ -58,8 +59,20 @@ def _most_open_yaw(pose: Pose, world: StaticWorld, fov: float) -> float:
 class EpisodeRunner:
     """Steps one episode; used by :func:`run_episode` and the Gymnasium env."""
 
-    def __init__(self, episode: Episode, collider: AvatarCollider, sensors: SensorSuite | None = None) -> None:
+    def __init__(
+        self,
+        episode: Episode,
+        collider: AvatarCollider,
+        sensors: SensorSuite | None = None,
+        crowd: ReactiveCrowd | None = None,
+    ) -> None:
+        """Ready to step ``episode`` from its start.
+
+        ``crowd``: reactive pedestrians (an option, :mod:`song.runtime.reactive`); ``episode`` and
+        ``collider`` must then be ``crowd.episode`` and a collider built on it (:func:`reactive_setup`).
+        """
         self.episode = episode
+        self.crowd = crowd
         self.cfg = episode.params.robot
         self.sensors = sensors if sensors is not None else SensorSuite.build(("state",), episode.params)
         self.world = StaticWorld(episode.static_map)
@@ -103,6 +116,7 @@ class EpisodeRunner:
         v, omega = clamp_command(v, omega, self.cfg.max_speed_mps, self.max_yaw_rate)
         self.command = np.array([v, omega])
         pose = integrate(self.pose, v, omega, self.dt)
+        before = self.time
         self.step_index += 1
         if self.world.collides(pose.xy, self.cfg.radius_m)[()]:
             self.c_obs += 1
@@ -116,6 +130,9 @@ class EpisodeRunner:
             self.last_safe = pose
         self.pose = pose
         self.poses.append(pose)
+        if self.crowd is not None:  # the people near the robot react to where it is now and where it is going
+            heading = np.array([np.cos(pose.yaw), np.sin(pose.yaw)])
+            self.crowd.advance(before, self.time, pose.xy, v * heading)
         self.nearest.append(self._nearest(self.time))
         count = self.collider.count(self.time, pose.xy)
         self.max_count = max(self.max_count, count)
@@ -168,6 +185,12 @@ class EpisodeRunner:
         )
 
 
+def reactive_setup(episode: Episode) -> tuple[Episode, AvatarCollider, ReactiveCrowd]:
+    """For reactive pedestrians: the episode with its own copy of the tracks, a collider on it, the crowd."""
+    crowd = ReactiveCrowd(episode)
+    return crowd.episode, make_collider(crowd.episode), crowd
+
+
 def run_episode(
     episode: Episode,
     policy: Policy,
@@ -175,6 +198,7 @@ def run_episode(
     sensors: SensorSuite | None = None,
     on_step: Callable[[EpisodeRunner], None] | None = None,
     step_timeout_s: float | None = DEFAULT_STEP_TIMEOUT_S,
+    crowd: ReactiveCrowd | None = None,
 ) -> EpisodeResult:
     """Run ``policy`` on ``episode`` until it ends; deterministic for a deterministic policy.
 
@@ -185,7 +209,7 @@ def run_episode(
     (:mod:`song.runtime.guard`).
     """
     sensors = sensors or SensorSuite.build(policy_sensors(policy), episode.params, max(64, len(episode.pedestrians)))
-    runner = EpisodeRunner(episode, collider, sensors)
+    runner = EpisodeRunner(episode, collider, sensors, crowd)
     try:
         call_policy(policy.reset, policy_view(episode, sensors.names), what="reset()", timeout_s=step_timeout_s)
         while runner.outcome is None:

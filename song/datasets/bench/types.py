@@ -76,12 +76,16 @@ class PedestrianTrack:
         t: (T,) float64 scenario time, s (increasing, 1/fps apart).
         xy: (T, 2) float64 root position, m.
         yaw: (T,) float64 heading, rad, CCW from +x.
+        shift: (T, 2) float64 or None: how far reactive pedestrians (:mod:`song.runtime.reactive`) are
+            moved off their recording, already in ``xy``; whatever poses the recorded full-body motion adds
+            it (:func:`track_shift`). None when the track is replayed as released.
     """
 
     ped_id: int
     t: np.ndarray
     xy: np.ndarray
     yaw: np.ndarray
+    shift: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -156,6 +160,20 @@ class Episode:
     split: str = "test"
     reference_ped_id: int = -1
     encounter_time: float = float("nan")
+
+
+def track_shift(track: PedestrianTrack, t: float) -> np.ndarray:
+    """(2,) ``track.shift`` at scenario time ``t`` (interpolated as the positions are; zeros when None), m."""
+    if track.shift is None:
+        return np.zeros(2)
+    times = track.t
+    if t <= times[0] or len(times) == 1:
+        return track.shift[0].copy()
+    if t >= times[-1]:
+        return track.shift[-1].copy()
+    k = int(np.searchsorted(times, t, side="right")) - 1
+    w = (t - times[k]) / (times[k + 1] - times[k])
+    return (1.0 - w) * track.shift[k] + w * track.shift[k + 1]
 
 
 def pedestrian_states(tracks: list[PedestrianTrack], t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

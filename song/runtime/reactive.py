@@ -1,0 +1,176 @@
+"""Reactive pedestrians (an option): people near the robot avoid it, then rejoin their recorded ways.
+
+Replay is the official protocol (the paper's pedestrians ignore the robot: its limitation 2). With this
+option an episode is no longer a pure replay: each step, every pedestrian within ``radius`` of the robot
+(and anyone still off its recorded track) is simulated online for that step. It prefers its recorded
+velocity plus a pull back onto its recorded position (``RETURN_S``), and keeps out of the robot's way by
+ORCA (van den Berg et al. 2011) with the robot as an agent that does not yield: one half-plane from the
+robot's position and velocity, the pedestrian taking all of the avoidance, solved with its speed
+limit as in RVO2's one-constraint linear program. Its step must keep its body off walls and off other
+pedestrians; when it would not, it takes its recorded step from where it is, or stands for that step.
+
+The displacement from the recording is written into the episode's own copy of the tracks (from the
+current sample on), so every consumer (collisions, sensors, rendering, metrics) sees the same displaced
+people; the avatars keep their recorded full-body motion, moved by that displacement (the legs keep the
+recorded gait while the root sidesteps). Deterministic: no randomness, the same commands give the same
+crowd.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from song.datasets.bench.types import Episode
+from song.runtime.world import StaticWorld
+
+REACT_RADIUS_M = 3.0  # pedestrians this close to the robot react to it
+RETURN_S = 1.5  # an offset from the recorded track is taken back at offset / RETURN_S
+TIME_HORIZON_S = 3.0  # ORCA's horizon against the robot
+MARGIN_M = 0.05  # kept beyond body contact with the robot
+MAX_ACCEL = 2.0  # m/s², the crowd's acceleration limit
+MIN_SPEED_LIMIT = 0.8  # m/s: even someone standing may step out of the robot's way this fast
+SPEED_FACTOR = 1.3  # ... and a walker may speed up to this much of its recorded speed
+SETTLED_M = 1e-4  # an offset below this is gone: the pedestrian is back on its recording
+
+
+def orca_line(
+    p: np.ndarray, v: np.ndarray, other_p: np.ndarray, other_v: np.ndarray, radius: float, tau: float, dt: float
+):
+    """ORCA's half-plane for an agent at ``p`` with velocity ``v`` against one that does not yield.
+
+    Returns ``(point (2,), direction (2,))``: a velocity x is allowed when it lies left of the line,
+    ``det(direction, point − x) ≤ 0`` (RVO2's convention); the agent takes all of the avoidance.
+    """
+    rel_p, rel_v = other_p - p, v - other_v
+    dist_sq = float(rel_p @ rel_p)
+    r_sq = radius * radius
+    if dist_sq > r_sq:
+        w = rel_v - rel_p / tau
+        w_len_sq = float(w @ w)
+        dot1 = float(w @ rel_p)
+        if dot1 < 0.0 and dot1 * dot1 > r_sq * w_len_sq:  # the cut-off circle
+            w_len = math.sqrt(w_len_sq)
+            unit = w / w_len
+            direction = np.array([unit[1], -unit[0]])
+            u = (radius / tau - w_len) * unit
+        else:  # a leg of the cone
+            leg = math.sqrt(dist_sq - r_sq)
+            if rel_p[0] * w[1] - rel_p[1] * w[0] > 0.0:
+                direction = np.array([rel_p[0] * leg - rel_p[1] * radius, rel_p[0] * radius + rel_p[1] * leg]) / dist_sq
+            else:
+                direction = (
+                    -np.array([rel_p[0] * leg + rel_p[1] * radius, -rel_p[0] * radius + rel_p[1] * leg]) / dist_sq
+                )
+            u = float(rel_v @ direction) * direction - rel_v
+    else:  # already overlapping: get out within this step
+        w = rel_v - rel_p / dt
+        w_len = max(math.sqrt(float(w @ w)), 1e-9)
+        unit = w / w_len
+        direction = np.array([unit[1], -unit[0]])
+        u = (radius / dt - w_len) * unit
+    return v + u, direction
+
+
+def solve_one(point: np.ndarray, direction: np.ndarray, preferred: np.ndarray, limit: float) -> np.ndarray:
+    """The velocity nearest ``preferred`` within speed ``limit`` on the allowed side of one ORCA line.
+
+    RVO2's ``linearProgram1`` for a single line; when the line misses the speed circle, the allowed
+    velocity nearest the line within the limit (straight away from the robot).
+    """
+    speed = float(np.hypot(*preferred))
+    x = preferred * (limit / speed) if speed > limit else preferred.copy()
+    if direction[0] * (point[1] - x[1]) - direction[1] * (point[0] - x[0]) <= 0.0:
+        return x
+    dot = float(point @ direction)
+    disc = dot * dot + limit * limit - float(point @ point)
+    if disc < 0.0:
+        normal = np.array([-direction[1], direction[0]])  # toward the allowed side
+        return normal * limit
+    root = math.sqrt(disc)
+    t = float(np.clip(direction @ (preferred - point), -dot - root, -dot + root))
+    return point + t * direction
+
+
+class ReactiveCrowd:
+    """The online part of an episode's crowd; build it, use :attr:`episode`, call :meth:`advance` each step."""
+
+    def __init__(self, episode: Episode, world: StaticWorld | None = None, radius: float = REACT_RADIUS_M) -> None:
+        self.radius = radius
+        self.body = float(episode.params.pedestrian_radius_m)
+        self.robot_radius = float(episode.params.robot.radius_m)
+        self.world = world if world is not None else StaticWorld(episode.static_map)
+        self.recorded = [(track.t, track.xy, track.yaw) for track in episode.pedestrians]
+        tracks = [
+            dataclasses.replace(track, xy=track.xy.copy(), shift=np.zeros_like(track.xy))
+            for track in episode.pedestrians
+        ]
+        self.episode = dataclasses.replace(episode, pedestrians=tracks)
+        self.offset = np.zeros((len(tracks), 2))
+        self.velocity = np.zeros((len(tracks), 2))  # the online velocity of those reacting, m/s
+
+    def _recorded(self, k: int, t: float) -> tuple[np.ndarray, np.ndarray, int]:
+        """Recorded position and velocity of pedestrian k at t, and the sample index at or before t."""
+        times, xy, _ = self.recorded[k]
+        if t <= times[0] or len(times) == 1:
+            return xy[0].copy(), np.zeros(2), 0
+        if t >= times[-1]:
+            return xy[-1].copy(), np.zeros(2), len(times) - 1
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        w = (t - times[i]) / (times[i + 1] - times[i])
+        return (1.0 - w) * xy[i] + w * xy[i + 1], (xy[i + 1] - xy[i]) / (times[i + 1] - times[i]), i
+
+    def advance(self, t0: float, t1: float, robot_xy: np.ndarray, robot_velocity: np.ndarray) -> None:
+        """Move the crowd from t0 to t1 (one control step) around the robot at ``robot_xy``."""
+        dt = t1 - t0
+        if dt <= 0.0 or not len(self.offset):
+            return
+        here = np.array([self._recorded(k, t0)[0] for k in range(len(self.offset))]) + self.offset
+        near = np.hypot(*(here - robot_xy).T) < self.radius
+        active = np.flatnonzero(near | (np.hypot(*self.offset.T) > SETTLED_M))
+        if not len(active):
+            return
+        after = np.array([self._recorded(k, t1)[0] for k in range(len(self.offset))]) + self.offset
+        combined = self.body + self.robot_radius + MARGIN_M
+        for k in active:
+            rec1, vel1, i1 = self._recorded(int(k), t1)
+            preferred = vel1 - self.offset[k] / RETURN_S
+            limit = max(SPEED_FACTOR * float(np.hypot(*vel1)), MIN_SPEED_LIMIT)
+            if near[k]:
+                point, direction = orca_line(
+                    here[k], self.velocity[k], robot_xy, robot_velocity, combined, TIME_HORIZON_S, dt
+                )
+                wanted = solve_one(point, direction, preferred, limit)
+            else:
+                wanted = preferred * min(1.0, limit / max(float(np.hypot(*preferred)), 1e-9))
+            change = wanted - self.velocity[k]
+            size = float(np.hypot(*change))
+            if size > MAX_ACCEL * dt:
+                wanted = self.velocity[k] + change * (MAX_ACCEL * dt / size)
+            others = np.delete(after, k, axis=0)
+            candidate = here[k]  # where it stands, when neither step is free
+            for step in (wanted, vel1):
+                if self._free(here[k] + step * dt, others):
+                    candidate = here[k] + step * dt
+                    break
+            self.velocity[k] = (candidate - here[k]) / dt
+            self.offset[k] = candidate - rec1
+            if float(np.hypot(*self.offset[k])) <= SETTLED_M:
+                self.offset[k] = 0.0
+            after[k] = candidate
+            self._write(int(k), i1)
+
+    def _free(self, xy: np.ndarray, others: np.ndarray) -> bool:
+        """A body at ``xy`` is off walls and off every other pedestrian (to 1 cm)."""
+        if self.world.collides(xy, self.body)[()]:
+            return False
+        return not len(others) or float(np.hypot(*(others - xy).T).min()) >= 2 * self.body - 0.01
+
+    def _write(self, k: int, i: int) -> None:
+        """Pedestrian k's displaced track from sample i on (what everyone reads at and after this time)."""
+        track = self.episode.pedestrians[k]
+        _, xy, _ = self.recorded[k]
+        track.xy[i:] = xy[i:] + self.offset[k]
+        track.shift[i:] = self.offset[k]

@@ -1,0 +1,131 @@
+"""Reactive pedestrians (an option): people near the robot avoid it, rejoin their tracks; replay is untouched."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+from typer.testing import CliRunner
+
+from song.cli import app
+from song.config import RobotConfig
+from song.datasets.bench.types import pedestrian_states, track_shift
+from song.runtime.avatars import make_collider
+from song.runtime.loop import EpisodeRunner, reactive_setup
+from song.runtime.reactive import orca_line, solve_one
+from tests.runtime.helpers import episode, track
+
+GOLDEN = Path(__file__).resolve().parents[1] / "artifacts" / "bench_golden"
+
+
+def _crossing():
+    # the robot stands still in the middle of the room; one pedestrian walks straight through where it stands,
+    # another crosses diagonally close to it
+    peds = [track(0, (1.0, 3.02), (9.0, 3.02), speed=1.0), track(1, (9.0, 2.0), (1.0, 4.0), speed=1.2)]
+    return episode(start=(5.0, 3.0), goal=(9.5, 5.5), peds=peds, robot=RobotConfig(max_steps=120))
+
+
+def _stand(runner: EpisodeRunner, seen: list | None = None):
+    """Step a robot that stands still to the end; ``seen`` collects the pedestrians' positions at each step."""
+    while runner.outcome is None:
+        runner.step(0.0, 0.0)
+        if seen is not None:
+            seen.append(pedestrian_states(runner.episode.pedestrians, runner.time)[1])
+    return runner.result()
+
+
+def test_reactive_pedestrians_walk_around_a_robot_on_their_path_and_rejoin_their_tracks() -> None:
+    ep = _crossing()
+    before = [t.xy.copy() for t in ep.pedestrians]
+    replay = _stand(EpisodeRunner(ep, make_collider(ep)))
+    assert replay.outcome == "human" and replay.nearest.min() < 0.3  # the recording walks into it
+    reactive, collider, crowd = reactive_setup(ep)
+    seen: list[np.ndarray] = []
+    result = _stand(EpisodeRunner(reactive, collider, None, crowd), seen)
+    contact = ep.params.pedestrian_radius_m + ep.params.robot.radius_m
+    assert result.outcome == "timeout" and result.max_gaussian_count == 0
+    assert result.nearest.min() >= contact  # everyone kept clear of it
+    assert np.abs(crowd.offset).max() < 0.05  # and walked back onto its recorded way afterwards
+    ped_xy = np.array(seen)  # as everyone saw them at each step (later steps rewrite the tracks' future)
+    pairs = np.linalg.norm(ped_xy[:, 0] - ped_xy[:, 1], axis=-1)
+    assert pairs.min() >= 2 * ep.params.pedestrian_radius_m - 0.01  # not into each other either
+    steps = np.linalg.norm(np.diff(ped_xy, axis=0), axis=-1) * reactive.params.robot.control_hz
+    assert steps.max() <= 1.3 * 1.2 + 0.05  # no jumps: within the walkers' speed limit
+    assert all(np.array_equal(t.xy, b) for t, b in zip(ep.pedestrians, before, strict=True))  # a copy was moved
+    assert all(t.shift is None for t in ep.pedestrians)
+
+
+def test_the_displacement_moves_the_posed_avatar_with_the_root() -> None:
+    ep = _crossing()
+    reactive, collider, crowd = reactive_setup(ep)
+    runner = EpisodeRunner(reactive, collider, None, crowd)
+    for _ in range(30):
+        runner.step(0.0, 0.0)
+    k, t = 0, runner.time
+    shift = track_shift(reactive.pedestrians[k], t)
+    assert np.hypot(*shift) > 0.1  # it is stepping around the robot now
+    moved = collider.pose(k, t).mean(axis=0)[:2]
+    recorded = make_collider(ep).pose(k, t).mean(axis=0)[:2]
+    assert np.allclose(moved - recorded, shift, atol=1e-6)
+
+
+def test_replay_reads_the_release_as_it_is() -> None:
+    ep = _crossing()
+    runner = EpisodeRunner(ep, make_collider(ep))
+    assert runner.crowd is None and runner.episode.pedestrians is ep.pedestrians
+    first = _stand(runner)
+    second = _stand(EpisodeRunner(ep, make_collider(ep)))
+    assert np.array_equal(first.trajectory, second.trajectory) and np.array_equal(first.nearest, second.nearest)
+
+
+def test_the_orca_velocity_keeps_clear_of_the_robot_over_the_horizon() -> None:
+    rng = np.random.default_rng(3)
+    radius, tau = 0.5, 3.0
+    checked = 0
+    for _ in range(400):
+        p, robot = rng.uniform(-3, 3, 2), rng.uniform(-3, 3, 2)
+        if np.hypot(*(p - robot)) <= radius + 0.05:
+            continue
+        v, robot_v, preferred = rng.uniform(-1, 1, (3, 2))
+        point, direction = orca_line(p, v, robot, robot_v, radius, tau, 0.1)
+        x = solve_one(point, direction, preferred, 1.5)
+        assert np.hypot(*x) <= 1.5 + 1e-9
+        if direction[0] * (point[1] - x[1]) - direction[1] * (point[0] - x[0]) > 1e-9:
+            continue  # the line misses the speed circle: no velocity within the limit avoids it
+        s = np.linspace(0.0, tau, 200)[:, None]
+        gap = np.hypot(*((p + s * x) - (robot + s * robot_v)).T)
+        assert gap.min() >= radius - 1e-6
+        checked += 1
+    assert checked > 300
+
+
+def test_eval_records_reactive_pedestrians_as_an_unofficial_mode(tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    base = ["eval", "--bench", str(GOLDEN), "--policy", "straight", "--out", str(out)]
+    assert CliRunner().invoke(app, base).exit_code == 0
+    result = CliRunner().invoke(app, [*base, "--set", "crowd.react_to_robot=true"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "straight-reactive.json").read_text())
+    assert summary["pedestrians"] == "reactive" and summary["official"] is False and not summary["overrides"]
+    assert json.loads((out / "straight.json").read_text())["pedestrians"] == "replay"
+    rows = pq.read_table(out / "straight-reactive.parquet").column("policy").to_pylist()
+    assert set(rows) == {"straight (reactive pedestrians)"}
+    table = (out / "results.md").read_text()
+    assert table.index("| straight | all |") < table.index("| straight (reactive pedestrians) | all |")
+    bad = CliRunner().invoke(app, [*base, "--set", "crowd.react_to_robot=maybe"])
+    assert bad.exit_code != 0 and "crowd.react_to_robot" in bad.output
+
+
+def test_the_gymnasium_env_steps_reactive_pedestrians() -> None:
+    from song.runtime.env import SongNavEnv
+
+    env = SongNavEnv(str(GOLDEN), sensors=("state",), reactive=True)
+    _, info = env.reset(seed=0)
+    assert env.runner.crowd is not None and env.runner.episode.pedestrians[0].shift is not None
+    for _ in range(5):
+        env.step(np.array([0.3, 0.0], dtype=np.float32))
+    replay = SongNavEnv(str(GOLDEN), sensors=("state",))
+    replay.reset(seed=0)
+    assert replay.runner.crowd is None and replay.runner.episode.pedestrians[0].shift is None
