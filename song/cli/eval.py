@@ -162,6 +162,9 @@ def collect_command(
     dataset_format: str = typer.Option(
         "v3.0", "--format", help="LeRobot codebase version: v3.0 (LeRobot's current release) or v2.1 (older stacks)"
     ),
+    reactive: bool = typer.Option(
+        False, "--reactive-pedestrians", help="pedestrians near the robot avoid it (recorded in the dataset)"
+    ),
 ) -> None:
     """Roll a policy out on training episodes; write what imitation learning needs (a LeRobot dataset)."""
     from song.runtime.collect import collect
@@ -181,6 +184,7 @@ def collect_command(
         allow_modified=allow_modified,
         no_avatars=no_avatars,
         dataset_format=dataset_format,
+        reactive=reactive,
     )
     console.print(
         f"wrote {summary.out}: {summary.episodes} of {summary.rollouts} rollouts ({summary.successes} successful), "

@@ -41,7 +41,7 @@ from song.runtime.avatars import make_collider
 from song.runtime.env import reward_terms
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.lerobot import FORMATS, PARTIAL_DIR, write_dataset
-from song.runtime.loop import EpisodeRunner, run_episode
+from song.runtime.loop import EpisodeRunner, reactive_setup, run_episode
 from song.runtime.policies import load_policy, policy_sensors
 from song.runtime.sensors import Box, SensorSuite, parse_sensor_names
 from song.util import folder_lock
@@ -159,6 +159,7 @@ class CollectJob:
     camera: dict[str, Any]
     step_timeout_s: float
     no_avatars: bool = False
+    reactive: bool = False
 
 
 class _Recorder:
@@ -183,7 +184,8 @@ def _collect_job(job: CollectJob, cache: dict[str, Any] = {}) -> dict[str, Any]:
     episode = dataclasses.replace(bench.episode(job.episode_id), params=bench.params)
     if job.no_avatars:
         episode = without_avatars(episode)
-    return record_rollout(bench, episode, load_policy(job.policy), job.sensors, job.camera, job.step_timeout_s)[0]
+    policy = load_policy(job.policy)
+    return record_rollout(bench, episode, policy, job.sensors, job.camera, job.step_timeout_s, job.reactive)[0]
 
 
 def record_rollout(
@@ -193,8 +195,11 @@ def record_rollout(
     sensors: tuple[str, ...],
     camera: dict[str, Any],
     step_timeout_s: float | None = DEFAULT_STEP_TIMEOUT_S,
+    reactive: bool = False,
 ) -> tuple[dict[str, Any], Any]:
     """Run ``policy`` on ``episode`` with :func:`run_episode`, recording every step; (record, result).
+
+    ``reactive``: pedestrians near the robot avoid it (:mod:`song.runtime.reactive`).
 
     Per step: the observation before acting, the executed action and the reward terms (the Gymnasium
     env's, :func:`song.runtime.env.reward_terms`). The record is what :func:`song.runtime.lerobot.write_dataset` writes.
@@ -215,7 +220,12 @@ def record_rollout(
         for plan in plans:
             steps[plan.key].append(plan.extract(obs))
 
-    result = run_episode(episode, recorder, make_collider(episode), suite, record, step_timeout_s)
+    crowd = None
+    if reactive:
+        episode, collider, crowd = reactive_setup(episode)
+    else:
+        collider = make_collider(episode)
+    result = run_episode(episode, recorder, collider, suite, record, step_timeout_s, crowd)
     out: dict[str, Any] = {
         "episode_id": episode.episode_id,
         "difficulty": episode.difficulty,
@@ -243,6 +253,7 @@ def collect(
     allow_modified: bool = False,
     no_avatars: bool = False,
     dataset_format: str = "v3.0",
+    reactive: bool = False,
 ) -> CollectSummary:
     """Roll ``policy_name`` out on the ``split`` episodes of a release into a LeRobot dataset at ``out``.
 
@@ -261,6 +272,7 @@ def collect(
         allow_modified: collect from a release that fails its integrity check (recorded in ``info.json``).
         no_avatars: the avatar-free ablation: episodes without pedestrians (recorded in ``info.json``).
         dataset_format: LeRobot codebase version to write, ``v3.0`` (LeRobot's current release) or ``v2.1``.
+        reactive: pedestrians near the robot avoid it (:mod:`song.runtime.reactive`; recorded in ``info.json``).
 
     Raises:
         SongError: an unknown sensor, ``keep`` or format, an existing non-empty ``out``, or an unknown split.
@@ -290,8 +302,15 @@ def collect(
         fps = float(bench.params.robot.control_hz)
         jobs = [
             CollectJob(
-                str(bench.root), e.episode_id, policy_name, chosen, dict(camera or {}), step_timeout_s, no_avatars
-            )
+                str(bench.root),
+                e.episode_id,
+                policy_name,
+                chosen,
+                dict(camera or {}),
+                step_timeout_s,
+                no_avatars,
+                reactive,
+            )  # fmt: skip
             for e in episodes
         ]
         done = {r["episode_id"]: r for r in parallel_map(_collect_job, jobs, workers)}
@@ -300,7 +319,8 @@ def collect(
         successes = sum(r["outcome"] == "success" for r in rollouts)
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": policy_name,
                  "split": split, "keep": keep, "rollouts": len(rollouts), "successes": successes,
-                 "release_check": bench.integrity or "ok", "ablation": "no_avatars" if no_avatars else None}  # fmt: skip
+                 "release_check": bench.integrity or "ok", "ablation": "no_avatars" if no_avatars else None,
+                 "pedestrians": "reactive" if reactive else "replay"}  # fmt: skip
         frames = write_dataset(out, kept, fps, split, about, dataset_format)
         return CollectSummary(out, len(kept), frames, successes, len(rollouts))
 

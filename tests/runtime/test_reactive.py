@@ -129,3 +129,13 @@ def test_the_gymnasium_env_steps_reactive_pedestrians() -> None:
     replay = SongNavEnv(str(GOLDEN), sensors=("state",))
     replay.reset(seed=0)
     assert replay.runner.crowd is None and replay.runner.episode.pedestrians[0].shift is None
+
+
+def test_collect_records_reactive_pedestrians(tmp_path: Path) -> None:
+    from song.runtime.collect import collect
+
+    summary = collect(str(GOLDEN), "straight", tmp_path / "ds", split="test", limit=1, keep="all", reactive=True)
+    info = json.loads((Path(summary.out) / "meta" / "info.json").read_text())
+    assert info["song"]["pedestrians"] == "reactive"
+    plain = collect(str(GOLDEN), "straight", tmp_path / "plain", split="test", limit=1, keep="all")
+    assert json.loads((Path(plain.out) / "meta" / "info.json").read_text())["song"]["pedestrians"] == "replay"
