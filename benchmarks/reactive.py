@@ -9,7 +9,10 @@ control step (thread CPU time and wall time) and report its median, p95 and max,
 pedestrians reacting in that step. The issue's target: ≤ 5 ms per control step for 20 pedestrians.
 
 With ``--bench``: the first ``--episodes`` test episodes of a release, the ``astar`` baseline, replay
-and reactive pedestrians, with the outcome counts and the human-collision rate of each.
+and reactive pedestrians, with the outcome counts and the human-collision rate of each; with
+``--figure PNG`` too, the first of those episodes where the replayed crowd runs into the robot and the
+reactive one does not: the robot camera 2 s, 1 s and 0 s before the replay's collision, and the map at
+that moment (replay above, reactive pedestrians below).
 """
 
 from __future__ import annotations
@@ -92,15 +95,74 @@ def release(bench: str, episodes: int) -> dict:
     return out
 
 
+def _rollout(bench, chosen, reactive: bool, pictures=None, at=()):
+    """``astar`` on one episode: (runner at the end, pictures at the steps ``at``)."""
+    import dataclasses
+
+    from song.runtime.avatars import make_collider
+    from song.runtime.guard import policy_view
+    from song.runtime.policies import load_policy
+    from song.runtime.sensors import SensorSuite
+
+    chosen = dataclasses.replace(chosen, params=bench.params)
+    crowd = None
+    if reactive:
+        chosen, collider, crowd = reactive_setup(chosen)
+    else:
+        collider = make_collider(chosen)
+    policy = load_policy("astar")
+    sensors = SensorSuite.build(("state",), bench.params, bench.max_pedestrians)
+    runner = EpisodeRunner(chosen, collider, sensors, crowd)
+    policy.reset(policy_view(chosen, sensors.names))
+    frames = []
+    while runner.outcome is None:
+        runner.step(*np.asarray(policy.act(runner.observation()), float))
+        if pictures is not None and runner.step_index in at:
+            frames.append(pictures.frame(runner))
+    return runner, frames
+
+
+def figure(bench_path: str, episodes: int, out: Path) -> str | None:
+    """Write the replay-vs-reactive picture (see the module doc); the episode shown, or None."""
+    from PIL import Image
+
+    from song.datasets.bench import open_benchmark
+    from song.runtime.pictures import PANEL_HEIGHT, PovPictures
+
+    bench = open_benchmark(bench_path)
+    for shown in list(bench.episodes(split="test"))[:episodes]:
+        replay, _ = _rollout(bench, shown, False)
+        if replay.outcome == "human" and _rollout(bench, shown, True)[0].outcome != "human":
+            break
+    else:
+        return None
+    hz = float(bench.params.robot.control_hz)
+    at = {max(1, replay.step_index - int(k * hz)) for k in (2, 1, 0)}
+    pictures = PovPictures(bench.params, bench.max_pedestrians, {"width": 320, "height": 240})
+    width = round(PANEL_HEIGHT * 320 / 240)  # each picture: RGB | depth | map; we keep the RGB, and the last map
+    rows = []
+    for reactive in (False, True):
+        frames = _rollout(bench, shown, reactive, pictures, at)[1]
+        rows.append(np.concatenate([f[:, :width] for f in frames] + [frames[-1][:, 2 * width :]], axis=1))
+    image = Image.fromarray(np.concatenate(rows, axis=0))
+    image.thumbnail((1800, 1800))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    image.save(out)
+    return shown.episode_id
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pedestrians", type=int, default=20)
     parser.add_argument("--bench", default=None, help="a release to compare replay and reactive on")
     parser.add_argument("--episodes", type=int, default=40)
+    parser.add_argument("--figure", type=Path, default=None, help="with --bench: write the replay/reactive picture")
     args = parser.parse_args()
     report = {"synthetic": synthetic(args.pedestrians)}
     if args.bench:
         report["release"] = release(args.bench, args.episodes)
+        if args.figure:
+            report["figure"] = {"path": str(args.figure), "episode": figure(args.bench, args.episodes, args.figure)}
     emit(report)
 
 
