@@ -16,7 +16,7 @@ import numpy as np
 
 from song.datasets.avatars.asset import load_avatar
 from song.datasets.avatars.cache import PosedAvatar, load_compact_cache
-from song.datasets.bench.types import PedestrianTrack, pedestrian_states, track_shift
+from song.datasets.bench.types import PedestrianTrack, pedestrian_states, track_motion
 
 AVATAR_REACH_M = 1.0  # horizontal root-to-fingertip reach of a 1.95 m adult in T-pose is ≈ 0.95 m
 
@@ -136,10 +136,11 @@ def gaussian_poser(episode) -> Callable[[int, float], np.ndarray] | None:
         avatar = posed[index]
         if avatar is None:
             return proxy(index, t)
-        means = avatar.means_at(t)
-        if tracks[index].shift is not None:  # a reactive pedestrian off its recording
-            means = means.copy()
-            means[:, :2] += track_shift(tracks[index], t)
+        if tracks[index].shift is None:
+            return avatar.means_at(t)
+        shown, shift = track_motion(tracks[index], t)  # a reactive pedestrian, off its recording
+        means = avatar.means_at(shown)
+        means[:, :2] += shift
         return means
 
     return pose

@@ -11,8 +11,9 @@ pedestrians; when it would not, it takes its recorded step from where it is, or 
 
 The displacement from the recording is written into the episode's own copy of the tracks (from the
 current sample on), so every consumer (collisions, sensors, rendering, metrics) sees the same displaced
-people; the avatars keep their recorded full-body motion, moved by that displacement (the legs keep the
-recorded gait while the root sidesteps). Deterministic: no randomness, the same commands give the same
+people. The avatars show their recorded full-body motion, time-warped to how far along its recorded way
+each has come (stopped by the robot, a walker holds its pose; hurrying back, it plays its gait faster)
+and moved from there to where it is. Deterministic: no randomness, the same commands give the same
 crowd.
 """
 
@@ -34,6 +35,8 @@ MAX_ACCEL = 2.0  # m/s², the crowd's acceleration limit
 MIN_SPEED_LIMIT = 0.8  # m/s: even someone standing may step out of the robot's way this fast
 SPEED_FACTOR = 1.3  # ... and a walker may speed up to this much of its recorded speed
 SETTLED_M = 1e-4  # an offset below this is gone: the pedestrian is back on its recording
+MAX_WARP = 2.0  # the recorded motion plays at most this much faster than real time (catching up) ...
+WARP_SAMPLES = 21  # ... and is searched at this many times per step (0 included: stopped, it holds its pose)
 
 
 def orca_line(
@@ -104,12 +107,13 @@ class ReactiveCrowd:
         self.world = world if world is not None else StaticWorld(episode.static_map)
         self.recorded = [(track.t, track.xy, track.yaw) for track in episode.pedestrians]
         tracks = [
-            dataclasses.replace(track, xy=track.xy.copy(), shift=np.zeros_like(track.xy))
+            dataclasses.replace(track, xy=track.xy.copy(), shift=np.zeros_like(track.xy), motion_t=track.t.copy())
             for track in episode.pedestrians
         ]
         self.episode = dataclasses.replace(episode, pedestrians=tracks)
         self.offset = np.zeros((len(tracks), 2))
         self.velocity = np.zeros((len(tracks), 2))  # the online velocity of those reacting, m/s
+        self.motion_t = np.full(len(tracks), float(episode.t0))  # the recorded motion's time each one shows, s
 
     def _recorded(self, k: int, t: float) -> tuple[np.ndarray, np.ndarray, int]:
         """Recorded position and velocity of pedestrian k at t, and the sample index at or before t."""
@@ -134,6 +138,9 @@ class ReactiveCrowd:
             return
         after = np.array([self._recorded(k, t1)[0] for k in range(len(self.offset))]) + self.offset
         combined = self.body + self.robot_radius + MARGIN_M
+        for k in range(len(self.offset)):
+            if k not in active:
+                self.motion_t[k] = t1  # on its recording: it shows the recorded motion of now
         for k in active:
             rec1, vel1, i1 = self._recorded(int(k), t1)
             preferred = vel1 - self.offset[k] / RETURN_S
@@ -159,8 +166,11 @@ class ReactiveCrowd:
             self.offset[k] = candidate - rec1
             if float(np.hypot(*self.offset[k])) <= SETTLED_M:
                 self.offset[k] = 0.0
+                self.motion_t[k] = t1
+            else:
+                self.motion_t[k] = self._progress(int(k), self.motion_t[k], t0, t1, candidate)
             after[k] = candidate
-            self._write(int(k), i1)
+            self._write(int(k), i1, t1)
 
     def _free(self, xy: np.ndarray, others: np.ndarray) -> bool:
         """A body at ``xy`` is off walls and off every other pedestrian (to 1 cm)."""
@@ -168,9 +178,32 @@ class ReactiveCrowd:
             return False
         return not len(others) or float(np.hypot(*(others - xy).T).min()) >= 2 * self.body - 0.01
 
-    def _write(self, k: int, i: int) -> None:
-        """Pedestrian k's displaced track from sample i on (what everyone reads at and after this time)."""
+    def _progress(self, k: int, shown: float, t0: float, t1: float, where: np.ndarray) -> float:
+        """The recorded motion's time pedestrian k shows at t1, having shown ``shown`` at t0, now at ``where``.
+
+        The body's gait follows how far along its recorded way it has come: the time, among
+        ``WARP_SAMPLES`` from ``shown`` to ``shown`` + ``MAX_WARP`` · (t1 − t0), whose recorded position
+        is nearest ``where`` (ties, as where the recording stands still: the one nearest t1 it can reach).
+        Stopped by the robot it holds its pose; hurrying back it plays its motion faster.
+        """
+        dt = t1 - t0
+        times = np.linspace(shown, shown + MAX_WARP * dt, WARP_SAMPLES)
+        recorded_t, xy, _ = self.recorded[k]
+        gaps = np.hypot(
+            np.interp(times, recorded_t, xy[:, 0]) - where[0], np.interp(times, recorded_t, xy[:, 1]) - where[1]
+        )
+        cost = gaps + 0.01 * np.abs(times - min(t1, shown + MAX_WARP * dt))
+        return float(times[int(np.argmin(cost))])
+
+    def _write(self, k: int, i: int, t1: float) -> None:
+        """Pedestrian k's displaced track from sample i on (what everyone reads at and after this time).
+
+        Its position, and what its avatar shows: the recorded motion at ``motion_t`` moved by ``shift``
+        (at later samples, as if it followed its recording's pace from here; the next step rewrites them).
+        """
         track = self.episode.pedestrians[k]
         _, xy, _ = self.recorded[k]
         track.xy[i:] = xy[i:] + self.offset[k]
-        track.shift[i:] = self.offset[k]
+        shown = self.motion_t[k]
+        track.motion_t[i:] = shown + (track.t[i:] - t1)
+        track.shift[i:] = self.offset[k] + self._recorded(k, t1)[0] - self._recorded(k, shown)[0]

@@ -27,7 +27,7 @@ import numpy as np
 from song import plugins
 from song.datasets.avatars.asset import load_avatar
 from song.datasets.avatars.cache import PosedAvatar, load_compact_cache
-from song.datasets.bench.types import Episode, pedestrian_states, track_shift
+from song.datasets.bench.types import Episode, pedestrian_states, track_motion
 from song.datasets.scenes.lighting import ProbeGrid, probe_irradiance
 from song.datasets.scenes.materials import linear_to_srgb, srgb_to_linear
 from song.datasets.scenes.ply import read_gaussian_ply
@@ -237,10 +237,10 @@ class SceneView:
         for j, k in enumerate(indices):
             avatar = self._avatar(k)
             if avatar.posed is not None:
-                means, quats = avatar.posed.pose_at(t)
-                if tracks[k].shift is not None:  # a reactive pedestrian off its recording
-                    means = means.copy()
-                    means[:, :2] += track_shift(tracks[k], t)
+                shown, shift = track_motion(tracks[k], t)  # (t, zeros) unless it is a reactive pedestrian
+                means, quats = avatar.posed.pose_at(shown)
+                if tracks[k].shift is not None:
+                    means[:, :2] += shift
             else:
                 _, xy, _ = pedestrian_states([tracks[k]], t)
                 yaw = float(np.interp(t, tracks[k].t, np.unwrap(tracks[k].yaw)))

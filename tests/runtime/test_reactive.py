@@ -7,11 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
+import pytest
 from typer.testing import CliRunner
 
 from song.cli import app
 from song.config import RobotConfig
-from song.datasets.bench.types import pedestrian_states, track_shift
+from song.datasets.bench.types import pedestrian_states, track_motion
 from song.runtime.avatars import make_collider
 from song.runtime.loop import EpisodeRunner, reactive_setup
 from song.runtime.reactive import orca_line, solve_one
@@ -57,18 +58,31 @@ def test_reactive_pedestrians_walk_around_a_robot_on_their_path_and_rejoin_their
     assert all(t.shift is None for t in ep.pedestrians)
 
 
-def test_the_displacement_moves_the_posed_avatar_with_the_root() -> None:
+def test_the_avatar_is_posed_where_the_pedestrian_is_with_its_gait_following_its_progress() -> None:
     ep = _crossing()
     reactive, collider, crowd = reactive_setup(ep)
     runner = EpisodeRunner(reactive, collider, None, crowd)
-    for _ in range(30):
+    recorded = make_collider(ep)
+    shown_at, held = [], 0
+    for _ in range(60):
         runner.step(0.0, 0.0)
-    k, t = 0, runner.time
-    shift = track_shift(reactive.pedestrians[k], t)
-    assert np.hypot(*shift) > 0.1  # it is stepping around the robot now
-    moved = collider.pose(k, t).mean(axis=0)[:2]
-    recorded = make_collider(ep).pose(k, t).mean(axis=0)[:2]
-    assert np.allclose(moved - recorded, shift, atol=1e-6)
+        t = runner.time
+        for k in range(2):
+            shown, shift = track_motion(reactive.pedestrians[k], t)
+            root = pedestrian_states(reactive.pedestrians[k : k + 1], t)[1][0]
+            # the body is the recorded pose of time `shown`, moved to where the pedestrian is now
+            body = collider.pose(k, t).mean(axis=0)[:2]
+            assert np.allclose(body - recorded.pose(k, shown).mean(axis=0)[:2], shift, atol=1e-5)
+            assert np.allclose(root - pedestrian_states(ep.pedestrians[k : k + 1], shown)[1][0], shift, atol=1e-9)
+        shown_at.append(track_motion(reactive.pedestrians[0], runner.time)[0])
+        held += int(abs(shown_at[-1] - runner.time) > 0.05)
+    steps = np.diff(shown_at)
+    assert (steps >= -1e-9).all() and steps.max() <= 2.0 / ep.params.robot.control_hz + 1e-9  # never backwards
+    assert held > 0  # while it stepped round the robot its gait fell behind the recording's
+    _stand(runner)
+    for walker in reactive.pedestrians:  # back on their recordings: the recorded motion of now (its last, past it)
+        shown, shift = track_motion(walker, runner.time)
+        assert shown == pytest.approx(min(runner.time, walker.t[-1]), abs=0.05) and np.abs(shift).max() < 0.01
 
 
 def test_replay_reads_the_release_as_it_is() -> None:

@@ -76,9 +76,10 @@ class PedestrianTrack:
         t: (T,) float64 scenario time, s (increasing, 1/fps apart).
         xy: (T, 2) float64 root position, m.
         yaw: (T,) float64 heading, rad, CCW from +x.
-        shift: (T, 2) float64 or None: how far reactive pedestrians (:mod:`song.runtime.reactive`) are
-            moved off their recording, already in ``xy``; whatever poses the recorded full-body motion adds
-            it (:func:`track_shift`). None when the track is replayed as released.
+        shift, motion_t: None for a track replayed as released. For reactive pedestrians
+            (:mod:`song.runtime.reactive`), whose ``xy`` is already moved off the recording: ``motion_t`` (T,)
+            the time of the recorded full-body motion to show at each sample, and ``shift`` (T, 2) how far
+            to move that pose (:func:`track_motion`).
     """
 
     ped_id: int
@@ -86,6 +87,7 @@ class PedestrianTrack:
     xy: np.ndarray
     yaw: np.ndarray
     shift: np.ndarray | None = None
+    motion_t: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -162,18 +164,23 @@ class Episode:
     encounter_time: float = float("nan")
 
 
-def track_shift(track: PedestrianTrack, t: float) -> np.ndarray:
-    """(2,) ``track.shift`` at scenario time ``t`` (interpolated as the positions are; zeros when None), m."""
-    if track.shift is None:
-        return np.zeros(2)
+def track_motion(track: PedestrianTrack, t: float) -> tuple[float, np.ndarray]:
+    """At scenario time ``t``: the recorded motion's time to pose, and the (2,) shift to move that pose by.
+
+    ``(t, zeros)`` for a replayed track; for a reactive one, ``motion_t`` and ``shift`` interpolated as
+    the positions are.
+    """
+    if track.shift is None or track.motion_t is None:
+        return t, np.zeros(2)
     times = track.t
     if t <= times[0] or len(times) == 1:
-        return track.shift[0].copy()
+        return float(track.motion_t[0]), track.shift[0].copy()
     if t >= times[-1]:
-        return track.shift[-1].copy()
+        return float(track.motion_t[-1]), track.shift[-1].copy()
     k = int(np.searchsorted(times, t, side="right")) - 1
     w = (t - times[k]) / (times[k + 1] - times[k])
-    return (1.0 - w) * track.shift[k] + w * track.shift[k + 1]
+    shown = (1.0 - w) * track.motion_t[k] + w * track.motion_t[k + 1]
+    return float(shown), (1.0 - w) * track.shift[k] + w * track.shift[k + 1]
 
 
 def pedestrian_states(tracks: list[PedestrianTrack], t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
