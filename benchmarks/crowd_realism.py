@@ -228,8 +228,11 @@ def markdown(rows: dict[str, dict]) -> str:
         ("standing share", lambda s: s["standing_share"]),
         ("tortuosity median (p95)", lambda s: f"{s['tortuosity_median']} ({s['tortuosity_p95']})"),
         (
-            "accel RMS (steady walking), m/s²",
-            lambda s: f"{s['acceleration_rms_mps2']} ({s['acceleration_rms_steady_mps2']})",
+            "accel RMS (steady walking: along / across), m/s²",
+            lambda s: (
+                f"{s['acceleration_rms_mps2']} ({s['acceleration_rms_steady_mps2']}: "
+                f"{s.get('acceleration_rms_steady_along_mps2')} / {s.get('acceleration_rms_steady_across_mps2')})"
+            ),
         ),
         ("heading reversals / walking min", lambda s: s["heading_reversals_per_walking_min"]),
         ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),

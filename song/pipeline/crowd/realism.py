@@ -15,7 +15,7 @@ measured. With ``MOVING_MPS`` = 0.2 m/s as the walking threshold:
 - **acceleration RMS** over moving samples (finite differences of the resampled velocity), and over
   steady walking alone (moving samples at least ``STEADY_S`` from any standing one: no setting off or
   stopping, which SONG's walkers do at every stop of their routines and the outdoor recordings' passers-by
-  rarely do in view);
+  rarely do in view), that one split along the velocity (speed changes) and across it (turning);
 - **density**: the mean number of pedestrians present per m², over the samples at which anyone is,
   on the floor the recording's people covered (:func:`covered_area`: the 0.5 m cells holding any of
   their samples; the real recordings give no walkable area), and, where it is known, on the walkable
@@ -155,6 +155,7 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
     groups = [resample(group) for group in groups]
     tracks = [track for group in groups for track in group]
     speeds, standing, active_standing, active_total, tortuosity, accel, steady = [], 0, 0, 0, [], [], []
+    along, across = [], []  # steady acceleration along the velocity (speed changes) and across it (turning)
     total = 0
     for track in tracks:
         v = _velocity(track)
@@ -173,6 +174,10 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
             window = np.convolve((~moving).astype(int), np.ones(2 * reach + 1, int))  # length n + 2·reach
             near_stop = window[reach : reach + len(moving)] > 0
             steady.append(np.hypot(*a[moving & ~near_stop].T))
+            keep = moving & ~near_stop
+            unit = v[keep] / s[keep, None]
+            along.append((a[keep] * unit).sum(axis=1))
+            across.append(a[keep, 1] * unit[:, 0] - a[keep, 0] * unit[:, 1])
         span = int(round(WINDOW_S * RATE_HZ))
         for start in range(0, len(track.t) - span, span):
             seg = track.xy[start : start + span + 1]
@@ -197,6 +202,8 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         "tortuosity_p95": round(float(np.percentile(tortuosity, 95)), 4) if tortuosity else None,
         "acceleration_rms_mps2": _rms(accel),
         "acceleration_rms_steady_mps2": _rms(steady),
+        "acceleration_rms_steady_along_mps2": _rms(along),
+        "acceleration_rms_steady_across_mps2": _rms(across),
         "passes": {kind: _summary(values) for kind, values in passes.items()},
     }
     covered = [density(group, covered_area(group)) for group in groups if group]

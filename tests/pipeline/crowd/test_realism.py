@@ -73,6 +73,21 @@ def test_steady_acceleration_leaves_setting_off_and_stopping_out() -> None:
     assert stats["tortuosity_p95"] == pytest.approx(1.0, abs=1e-9)
 
 
+def test_steady_acceleration_splits_into_speed_changes_and_turning() -> None:
+    """On a circle at a constant 1.2 m/s the acceleration is all across the velocity (v²/R), none along it;
+    on a straight line with the speed swinging, all along it."""
+    t = np.arange(0.0, 40.0, 0.1)
+    radius, speed = 3.0, 1.2
+    circle = Track(t, radius * np.column_stack([np.cos(speed / radius * t), np.sin(speed / radius * t)]))
+    stats = crowd_statistics([circle])
+    assert stats["acceleration_rms_steady_across_mps2"] == pytest.approx(speed**2 / radius, rel=0.05)  # 2.5 Hz chords
+    assert stats["acceleration_rms_steady_along_mps2"] < 0.01  # (one-sided differences at the ends)
+    x = 1.2 * t + 0.5 * np.sin(t)  # speed 1.2 + 0.5 cos t: always moving
+    swing = crowd_statistics([Track(t, np.column_stack([x, np.zeros_like(x)]))])
+    assert swing["acceleration_rms_steady_across_mps2"] == pytest.approx(0.0, abs=1e-9)
+    assert swing["acceleration_rms_steady_along_mps2"] == pytest.approx(swing["acceleration_rms_steady_mps2"])
+
+
 def test_wall_clearances_are_taken_over_moving_samples() -> None:
     """A walk 0.3 m from a wall (y = 0) gives its body's gap at every 2.5 Hz sample; someone standing gives none."""
     along = walk((0.0, 0.3), (1.0, 0.0), 0.0, 10.0)
