@@ -34,6 +34,7 @@ import shutil
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -165,10 +166,15 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
     tracks, closest, shares, sample_shares, statuses, facing, walls = [], np.inf, [], [], [], [], []
     reversals, walking_minutes = 0, 0.0
     walkable: list[float] = []
+    sizes: list[int] = []  # walking groups' sizes (1: alone), from the intents
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
         statuses += json.loads((scene / "crowd_status.json").read_text()).values()
+        groups = Counter(
+            i.group if i.group is not None else -1 - i.id for i in read_intents(scene / "intents.json").intents
+        )
+        sizes += list(groups.values())
         if len(crowd.ids) == 0:
             continue
         objects = load_scene_package(scenes / scene.name).semantic_map.object_by_id()
@@ -206,6 +212,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
             "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
             "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
+            "in_groups_share": round(sum(n for n in sizes if n > 1) / max(sum(sizes), 1), 4),
+            "group_sizes": {str(n): sizes.count(n) for n in sorted(set(sizes))},
             "scenes": len(results),
             "failed_scenes": [x.scene_id for x in results if x.status != "ok"],
         }

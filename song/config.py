@@ -67,6 +67,12 @@ class IntentsConfig(_Section):
     max_depart_s: float = Field(8.0, ge=0.0, description="first departures drawn in [-lead_in_s, this], s")
     scenario_s: float = Field(60.0, gt=0.0, description="routines are chained to keep people busy this long, s")
     max_legs: int = Field(4, ge=1, le=8, description="most legs (object-to-object walks) in one routine")
+    group_share: float = Field(
+        0.0,
+        ge=0.0,
+        lt=1.0,
+        description="share of pedestrians walking with others, in groups of 2-4 (0: everyone alone; docs/crowd.md)",
+    )
 
 
 class CrowdConfig(_Section):

@@ -58,6 +58,9 @@ class Intent(BaseModel):
     geodesic_m: float = Field(0.0, ge=0.0, description="grid shortest-path length start→goal, m")
     provenance: Provenance
     legs: list[Leg] = Field(default_factory=list, description="the routine's legs, the first one included")
+    group: int | None = Field(
+        None, ge=0, description="id of the pedestrian this one walks with (its group's leader; the leader's own id)"
+    )
 
     def route(self) -> list[Leg]:
         """The legs of the routine (a single leg built from the fields above when ``legs`` is empty)."""

@@ -86,6 +86,11 @@ SEPARATION_REACH_M = 0.15  # beyond 2r + this (two frames' steps at 1.8 m/s, and
 # 2r (a wall on the other side) is legal but leaves avoidance no room, and the walker stalls in it again
 REPLAN_CLEARANCE_M = 0.1
 MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
+SLOT_M = 1.2  # a group member walks this far beside (or behind) its leader: beyond the comfort distance ORCA keeps
+FORMATION_S = 1.0  # a member closes the gap to its slot in about this long
+CATCH_UP = 1.4  # a member may walk this much faster than the group to keep up
+NEAR_STOP_M = 1.5  # this near its stop, a member (or its leader) walks to its own spot there
+GROUP_HOLD_S = 0.2  # a leader waiting for a member at a stop checks again after this
 
 
 @dataclass
@@ -139,6 +144,9 @@ class _Walkers:
     waited: np.ndarray  # (N,) s: how long the pedestrian has put off walking off, for someone passing close
     skipped: list[list[int]]  # per pedestrian: the routine stops (indices into Intent.route()) it gave up
     gave_up: np.ndarray  # (N,) s: when it gave its routine up, stalled for good on its last leg (nan: never)
+    leader: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,) the group's leader (−1: none)
+    member: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,) place in its group (0: first)
+    abreast: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (N,) its slot beside the leader is free
 
 
 def _to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -262,9 +270,83 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         skipped=[[] for _ in range(n)],
         gave_up=np.full(n, np.nan),
     )
+    w.leader, w.member, w.abreast = _groups(intents), np.zeros(n, np.int64), np.ones(n, bool)
+    for lead in np.unique(w.leader[w.leader >= 0]):
+        w.member[w.leader == lead] = np.arange(1, int((w.leader == lead).sum()) + 1)
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
     return w, failures
+
+
+def _groups(intents: list[Intent]) -> np.ndarray:
+    """(N,) index of each pedestrian's group leader among ``intents`` (−1: the leader itself, or alone)."""
+    index = {i.id: k for k, i in enumerate(intents)}
+    return np.array(
+        [index.get(i.group, -1) if i.group is not None and i.group != i.id else -1 for i in intents], dtype=np.int64
+    )
+
+
+def _formation(w: _Walkers, mesh: Navmesh, rows: np.ndarray, moving: np.ndarray, inputs: list, check: bool) -> None:
+    """Group members walk with their leader: the avoidance's preferred velocities and speed limits, in place.
+
+    A member on the same leg as its leader, both walking and the member not yet near its own stop, heads
+    for its slot: abreast of the leader (``SLOT_M`` to its right, then left, then two to the right) where
+    that spot is on the mesh in sight of the leader, else in file behind it; its preferred velocity is the
+    leader's plus the way to the slot over ``FORMATION_S``, up to ``CATCH_UP`` times its speed. A leader
+    slows for a member lagging behind its slot. (Moussaïd et al. 2010: pairs walk abreast at low density.)
+    """
+    followers = np.flatnonzero((w.leader >= 0) & moving)
+    if not len(followers):
+        return
+    where = np.full(len(w.pos), -1, dtype=np.int64)
+    where[rows] = np.arange(len(rows))
+    velocities, preferred, limits = (
+        inputs[1],
+        inputs[2],
+        inputs[4],
+    )  # (positions, velocities, preferred, radii, limits, held)
+    lag: dict[int, float] = {}
+    for k in followers:
+        lead = int(w.leader[k])
+        if not moving[lead] or w.leg[k] != w.leg[lead] or where[k] < 0 or where[lead] < 0:
+            continue
+        if _length(w.goal[k] - w.pos[k]) < NEAR_STOP_M or _length(w.goal[lead] - w.pos[lead]) < NEAR_STOP_M:
+            continue  # each goes to its own spot at the stop
+        v_lead = velocities[where[lead]] if _length(velocities[where[lead]]) > 0.2 else preferred[where[lead]]
+        heading = v_lead / max(float(_length(v_lead)), 1e-9)
+        right = np.array([heading[1], -heading[0]])
+        m = int(w.member[k])
+        side = SLOT_M * (1.0 if m % 2 else -1.0) * ((m + 1) // 2)
+        beside = w.pos[lead] + right * side
+        if check:
+            w.abreast[k] = bool(
+                mesh.contains(beside[None])[0] and mesh.segment_clear(w.pos[lead][None], beside[None])[0]
+            )
+        slot = beside if w.abreast[k] else w.pos[lead] - heading * SLOT_M * m
+        want = v_lead + (slot - w.pos[k]) / FORMATION_S
+        cap = CATCH_UP * w.speed[k]
+        size = float(_length(want))
+        preferred[where[k]] = want * min(1.0, cap / max(size, 1e-9))
+        limits[where[k]] = max(limits[where[k]], cap)
+        lag[lead] = max(lag.get(lead, 0.0), float(_length(slot - w.pos[k])))
+    for lead, behind in lag.items():
+        preferred[where[lead]] *= float(np.clip(1.2 - behind, 0.3, 1.0))
+
+
+def _hold_for_group(w: _Walkers, t: float) -> None:
+    """At a stop a group waits for its members, then leaves together.
+
+    A leader dwelling (or about to leave) while a member is still on its way to this stop stays; once the
+    leader walks on, members standing at the stop leave with it.
+    """
+    for k in np.flatnonzero(w.leader >= 0):
+        lead = int(w.leader[k])
+        if w.arrived[k] or w.arrived[lead]:
+            continue
+        if w.leg[k] < w.leg[lead] and w.dwell_until[lead] > t - 1e-9:
+            w.dwell_until[lead] = max(w.dwell_until[lead], t + GROUP_HOLD_S)
+        elif w.leg[k] == w.leg[lead] and w.dwell_until[k] > t and w.dwell_until[lead] <= t:
+            w.dwell_until[k] = t
 
 
 def _next_leg(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
@@ -426,6 +508,8 @@ def _step_frame(
     rows, *inputs = avoidance_inputs(
         w.pos, w.vel, cur, nxt, has_next, goal, w.speed, moving, r, dt, reach, frame, w.last_progress,
     )  # fmt: skip
+    if (w.leader >= 0).any():
+        _formation(w, mesh, rows, moving, inputs, frame % CHECK_EVERY == 0)
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
         w.pos, w.vel, rows, new_vel, moving, w.speed, dt, cfg.max_accel_mps2 * dt, 2 * r + OVERLAP_MARGIN_M, OVERLAP_PASSES,
@@ -562,6 +646,8 @@ def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfi
     while frame < frames - 1 and not w.arrived.all():
         frame += 1
         t = frame / cfg.fps
+        if (w.leader >= 0).any():
+            _hold_for_group(w, t)
         moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
         _wait_for_passers(w, moving, frame, cfg)
         w.face[moving] = np.nan  # it has left its object

@@ -18,6 +18,7 @@ from song.datasets.run.layout import INTENTS_FILE
 from song.datasets.scenes import ScenePackage
 from song.errors import MissingDependencyError
 from song.pipeline.chain import StageContext, StageOutput
+from song.pipeline.intents.groups import form_groups
 from song.pipeline.intents.llm import GeminiClient, LLMError, OpenAICompatibleClient, scrub, structured_call
 from song.pipeline.intents.navigation import Walkable, snap_points, walkable
 from song.pipeline.intents.offline import ROUTE_REPEATS, OfflineIntentModel
@@ -368,6 +369,7 @@ def generate_intents(
         proposals = offline.propose(package.semantic_map, geodesic, 2 * n, rng)
         kept, rejected = filter_intents(proposals, package, walk, snaps, config, provenance, rng, n)
     kept = extend_routines(kept, package, walk, snaps, config, rng)
+    kept = form_groups(kept, walk, config.intents.group_share, config.intents.min_spawn_separation_m, rng)
     return IntentSet(
         scene_id=package.scene_id,
         provenance=provenance,
