@@ -99,17 +99,11 @@ def _rollout(bench, chosen, reactive: bool, pictures=None, at=()):
     """``astar`` on one episode: (runner at the end, pictures at the steps ``at``)."""
     import dataclasses
 
-    from song.runtime.avatars import make_collider
     from song.runtime.guard import policy_view
     from song.runtime.policies import load_policy
     from song.runtime.sensors import SensorSuite
 
-    chosen = dataclasses.replace(chosen, params=bench.params)
-    crowd = None
-    if reactive:
-        chosen, collider, crowd = reactive_setup(chosen)
-    else:
-        collider = make_collider(chosen)
+    chosen, collider, crowd = reactive_setup(dataclasses.replace(chosen, params=bench.params), reactive)
     policy = load_policy("astar")
     sensors = SensorSuite.build(("state",), bench.params, bench.max_pedestrians)
     runner = EpisodeRunner(chosen, collider, sensors, crowd)

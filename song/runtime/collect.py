@@ -37,7 +37,6 @@ import numpy as np
 from song.datasets.bench import open_benchmark
 from song.errors import SongError
 from song.runtime.ablation import without_avatars
-from song.runtime.avatars import make_collider
 from song.runtime.env import reward_terms
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.lerobot import FORMATS, PARTIAL_DIR, write_dataset
@@ -220,11 +219,7 @@ def record_rollout(
         for plan in plans:
             steps[plan.key].append(plan.extract(obs))
 
-    crowd = None
-    if reactive:
-        episode, collider, crowd = reactive_setup(episode)
-    else:
-        collider = make_collider(episode)
+    episode, collider, crowd = reactive_setup(episode, reactive)
     result = run_episode(episode, recorder, collider, suite, record, step_timeout_s, crowd)
     out: dict[str, Any] = {
         "episode_id": episode.episode_id,

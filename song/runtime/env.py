@@ -23,7 +23,6 @@ from song.datasets.bench.schema import SCHEMA_VERSION, schema_major
 from song.datasets.bench.types import RuntimeParams
 from song.errors import MissingDependencyError
 from song.runtime.ablation import without_avatars
-from song.runtime.avatars import make_collider
 from song.runtime.guard import PolicyFailure, as_command
 from song.runtime.loop import EpisodeRunner, reactive_setup
 from song.runtime.sensors import SensorSuite, to_gym_space
@@ -145,11 +144,8 @@ class SongNavEnv(gym.Env if gym is not None else object):  # type: ignore[misc]
         episode = dataclasses.replace(self.bench.episode(episode_id), params=self.params)
         if self.no_avatars:
             episode = without_avatars(episode)
-        if self.reactive:
-            episode, collider, crowd = reactive_setup(episode)
-            self.runner = EpisodeRunner(episode, collider, self.sensors, crowd)
-        else:
-            self.runner = EpisodeRunner(episode, make_collider(episode), self.sensors)
+        episode, collider, crowd = reactive_setup(episode, self.reactive)
+        self.runner = EpisodeRunner(episode, collider, self.sensors, crowd)
 
     def step(self, action):
         """Apply [v, ω]; reward = progress toward the goal, ±10 at a success / collision end.

@@ -24,7 +24,6 @@ from song.datasets.bench.schema import DIFFICULTIES
 from song.datasets.bench.types import RuntimeParams
 from song.parallel import parallel_map
 from song.runtime.ablation import without_avatars
-from song.runtime.avatars import make_collider
 from song.runtime.guard import DEFAULT_STEP_TIMEOUT_S
 from song.runtime.isolate import IsolatedPolicy
 from song.runtime.loop import EpisodeResult, reactive_setup, run_episode
@@ -164,10 +163,8 @@ def _run_job(job: EvalJob, cache: dict[str, Benchmark] = {}) -> EpisodeResult:  
     else:
         policy, limit = load_policy(setup.policy), setup.step_timeout_s  # first: it may register its sensors
     sensors = SensorSuite.build(setup.sensors, setup.params, bench.max_pedestrians, setup.sensor_options)
-    if setup.reactive:
-        episode, collider, crowd = reactive_setup(episode)
-        return run_episode(episode, policy, collider, sensors, step_timeout_s=limit, crowd=crowd)
-    return run_episode(episode, policy, make_collider(episode), sensors, step_timeout_s=limit)
+    episode, collider, crowd = reactive_setup(episode, setup.reactive)
+    return run_episode(episode, policy, collider, sensors, step_timeout_s=limit, crowd=crowd)
 
 
 _ISOLATED: dict[tuple[str, float], IsolatedPolicy] = {}

@@ -75,7 +75,7 @@ class EpisodeRunner:
         self.crowd = crowd
         self.cfg = episode.params.robot
         self.sensors = sensors if sensors is not None else SensorSuite.build(("state",), episode.params)
-        self.world = StaticWorld(episode.static_map)
+        self.world = crowd.world if crowd is not None else StaticWorld(episode.static_map)  # one clearance field
         self.collider = collider
         self.dt = 1.0 / self.cfg.control_hz
         self.max_yaw_rate = np.deg2rad(self.cfg.max_yaw_rate_deg_s)
@@ -185,8 +185,13 @@ class EpisodeRunner:
         )
 
 
-def reactive_setup(episode: Episode) -> tuple[Episode, AvatarCollider, ReactiveCrowd]:
-    """For reactive pedestrians: the episode with its own copy of the tracks, a collider on it, the crowd."""
+def reactive_setup(episode: Episode, reactive: bool = True) -> tuple[Episode, AvatarCollider, ReactiveCrowd | None]:
+    """The episode, its collider and its online crowd (None for replay).
+
+    For reactive pedestrians the episode comes back with its own copy of the tracks, the collider built on it.
+    """
+    if not reactive:
+        return episode, make_collider(episode), None
     crowd = ReactiveCrowd(episode)
     return crowd.episode, make_collider(crowd.episode), crowd
 

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from song.datasets.bench.types import Episode
+from song.datasets.bench.types import Episode, pedestrian_states
 from song.runtime.world import StaticWorld
 
 REACT_RADIUS_M = 3.0  # pedestrians this close to the robot react to it
@@ -105,7 +105,7 @@ class ReactiveCrowd:
         self.body = float(episode.params.pedestrian_radius_m)
         self.robot_radius = float(episode.params.robot.radius_m)
         self.world = world if world is not None else StaticWorld(episode.static_map)
-        self.recorded = [(track.t, track.xy, track.yaw) for track in episode.pedestrians]
+        self.recorded = list(episode.pedestrians)  # the release's tracks, as replay reads them
         tracks = [
             dataclasses.replace(track, xy=track.xy.copy(), shift=np.zeros_like(track.xy), motion_t=track.t.copy())
             for track in episode.pedestrians
@@ -115,34 +115,27 @@ class ReactiveCrowd:
         self.velocity = np.zeros((len(tracks), 2))  # the online velocity of those reacting, m/s
         self.motion_t = np.full(len(tracks), float(episode.t0))  # the recorded motion's time each one shows, s
 
-    def _recorded(self, k: int, t: float) -> tuple[np.ndarray, np.ndarray, int]:
-        """Recorded position and velocity of pedestrian k at t, and the sample index at or before t."""
-        times, xy, _ = self.recorded[k]
-        if t <= times[0] or len(times) == 1:
-            return xy[0].copy(), np.zeros(2), 0
-        if t >= times[-1]:
-            return xy[-1].copy(), np.zeros(2), len(times) - 1
-        i = int(np.searchsorted(times, t, side="right")) - 1
-        w = (t - times[i]) / (times[i + 1] - times[i])
-        return (1.0 - w) * xy[i] + w * xy[i + 1], (xy[i + 1] - xy[i]) / (times[i + 1] - times[i]), i
+    def _recorded_xy(self, k: int, times) -> np.ndarray:
+        """Pedestrian k's recorded position(s) at ``times`` (clamped to its track's ends, as replay is)."""
+        track = self.recorded[k]
+        return np.stack([np.interp(times, track.t, track.xy[:, 0]), np.interp(times, track.t, track.xy[:, 1])], -1)
 
     def advance(self, t0: float, t1: float, robot_xy: np.ndarray, robot_velocity: np.ndarray) -> None:
         """Move the crowd from t0 to t1 (one control step) around the robot at ``robot_xy``."""
         dt = t1 - t0
         if dt <= 0.0 or not len(self.offset):
             return
-        here = np.array([self._recorded(k, t0)[0] for k in range(len(self.offset))]) + self.offset
+        here = pedestrian_states(self.recorded, t0)[1] + self.offset
         near = np.hypot(*(here - robot_xy).T) < self.radius
-        active = np.flatnonzero(near | (np.hypot(*self.offset.T) > SETTLED_M))
-        if not len(active):
+        reacting = near | (np.hypot(*self.offset.T) > SETTLED_M)
+        self.motion_t[~reacting] = t1  # on their recordings: they show the recorded motion of now
+        if not reacting.any():
             return
-        after = np.array([self._recorded(k, t1)[0] for k in range(len(self.offset))]) + self.offset
+        _, recorded, recorded_v = pedestrian_states(self.recorded, t1)
+        after = recorded + self.offset
         combined = self.body + self.robot_radius + MARGIN_M
-        for k in range(len(self.offset)):
-            if k not in active:
-                self.motion_t[k] = t1  # on its recording: it shows the recorded motion of now
-        for k in active:
-            rec1, vel1, i1 = self._recorded(int(k), t1)
+        for k in np.flatnonzero(reacting):
+            rec1, vel1 = recorded[k], recorded_v[k]
             preferred = vel1 - self.offset[k] / RETURN_S
             limit = max(SPEED_FACTOR * float(np.hypot(*vel1)), MIN_SPEED_LIMIT)
             if near[k]:
@@ -170,7 +163,7 @@ class ReactiveCrowd:
             else:
                 self.motion_t[k] = self._progress(int(k), self.motion_t[k], t0, t1, candidate)
             after[k] = candidate
-            self._write(int(k), i1, t1)
+            self._write(int(k), t1)
 
     def _free(self, xy: np.ndarray, others: np.ndarray) -> bool:
         """A body at ``xy`` is off walls and off every other pedestrian (to 1 cm)."""
@@ -188,22 +181,19 @@ class ReactiveCrowd:
         """
         dt = t1 - t0
         times = np.linspace(shown, shown + MAX_WARP * dt, WARP_SAMPLES)
-        recorded_t, xy, _ = self.recorded[k]
-        gaps = np.hypot(
-            np.interp(times, recorded_t, xy[:, 0]) - where[0], np.interp(times, recorded_t, xy[:, 1]) - where[1]
-        )
+        gaps = np.hypot(*(self._recorded_xy(k, times) - where).T)
         cost = gaps + 0.01 * np.abs(times - min(t1, shown + MAX_WARP * dt))
         return float(times[int(np.argmin(cost))])
 
-    def _write(self, k: int, i: int, t1: float) -> None:
-        """Pedestrian k's displaced track from sample i on (what everyone reads at and after this time).
+    def _write(self, k: int, t1: float) -> None:
+        """Pedestrian k's displaced track from the sample at or before t1 on (what everyone reads from now on).
 
         Its position, and what its avatar shows: the recorded motion at ``motion_t`` moved by ``shift``
         (at later samples, as if it followed its recording's pace from here; the next step rewrites them).
         """
-        track = self.episode.pedestrians[k]
-        _, xy, _ = self.recorded[k]
-        track.xy[i:] = xy[i:] + self.offset[k]
+        track, recorded = self.episode.pedestrians[k], self.recorded[k]
+        i = max(int(np.searchsorted(track.t, t1, side="right")) - 1, 0)
+        track.xy[i:] = recorded.xy[i:] + self.offset[k]
         shown = self.motion_t[k]
         track.motion_t[i:] = shown + (track.t[i:] - t1)
-        track.shift[i:] = self.offset[k] + self._recorded(k, t1)[0] - self._recorded(k, shown)[0]
+        track.shift[i:] = self.offset[k] + self._recorded_xy(k, t1) - self._recorded_xy(k, shown)
