@@ -49,26 +49,22 @@ class Passages:
     count: int
     sides: list[tuple[int, int, np.ndarray]]  # per passage: (row, col) of a window around it, its sides there
 
-    def _cells(self, points: np.ndarray) -> np.ndarray:
-        return np.floor((np.asarray(points, dtype=np.float64) - self.origin) / CELL_M).astype(np.int64)
+    def _lookup(self, raster: np.ndarray, row: int, col: int, points: np.ndarray) -> np.ndarray:
+        """(M,) the values of ``raster`` (whose first cell is cell (row, col)) at points (M, 2); −1 off it."""
+        ij = np.floor((np.asarray(points, dtype=np.float64) - self.origin) / CELL_M).astype(np.int64) - [col, row]
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < raster.shape[1]) & (ij[:, 1] >= 0) & (ij[:, 1] < raster.shape[0])
+        out = np.full(len(ij), -1, dtype=np.int64)
+        out[ok] = raster[ij[ok, 1], ij[ok, 0]]
+        return out
 
     def side_at(self, passage: int, points: np.ndarray) -> np.ndarray:
         """(M,) which side of ``passage`` each point (M, 2) is on, −1 where none (inside it, or away from it)."""
         row, col, sides = self.sides[passage]
-        ij = self._cells(points) - np.array([col, row])
-        ok = (ij[:, 0] >= 0) & (ij[:, 0] < sides.shape[1]) & (ij[:, 1] >= 0) & (ij[:, 1] < sides.shape[0])
-        out = np.full(len(ij), -1, dtype=np.int64)
-        out[ok] = sides[ij[ok, 1], ij[ok, 0]]
-        return out
+        return self._lookup(sides, row, col, points)
 
     def label_at(self, points: np.ndarray) -> np.ndarray:
         """(M,) passage of each point (M, 2), −1 where none."""
-        ij = self._cells(points)
-        rows, cols = self.labels.shape
-        ok = (ij[:, 0] >= 0) & (ij[:, 0] < cols) & (ij[:, 1] >= 0) & (ij[:, 1] < rows)
-        out = np.full(len(ij), -1, dtype=np.int64)
-        out[ok] = self.labels[ij[ok, 1], ij[ok, 0]]
-        return out
+        return self._lookup(self.labels, 0, 0, points)
 
 
 def _disc(radius: float) -> np.ndarray:
@@ -97,11 +93,11 @@ def _sides(inside: np.ndarray, parts: np.ndarray, i: int, box: tuple[slice, slic
         return None
     touching = np.unique(pieces[ndimage.binary_dilation(part, structure=np.ones((3, 3), dtype=bool)) & rest])
     touching = touching[touching > 0]
-    areas = ndimage.sum_labels(rest, pieces, index=touching) * CELL_M**2
-    if int((areas >= MIN_PIECE_M2).sum()) < 2:
+    sides = touching[ndimage.sum_labels(rest, pieces, index=touching) * CELL_M**2 >= MIN_PIECE_M2]
+    if len(sides) < 2:
         return None
     number = np.full(n + 1, -1, dtype=np.int32)
-    number[touching[areas >= MIN_PIECE_M2]] = np.arange(int((areas >= MIN_PIECE_M2).sum()), dtype=np.int32)
+    number[sides] = np.arange(len(sides), dtype=np.int32)
     return win[0].start, win[1].start, number[pieces]
 
 
@@ -139,12 +135,13 @@ def path_ahead(pos: np.ndarray, corners: np.ndarray, reach: float) -> tuple[np.n
     seg = np.diff(poly, axis=0)
     length = np.hypot(seg[:, 0], seg[:, 1])
     cum = np.concatenate([[0.0], np.cumsum(length)])
-    s = np.arange(0.0, min(reach, cum[-1]) + 1e-9, LOOK_STEP_M)
-    if not len(s) or s[-1] < min(reach, cum[-1]):
-        s = np.append(s, min(reach, cum[-1]))
-    j = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1) if len(seg) else np.zeros(len(s), int)
+    end = min(reach, cum[-1])
+    s = np.arange(0.0, end + 1e-9, LOOK_STEP_M)
+    if s[-1] < end:
+        s = np.append(s, end)
     if not len(seg):
         return np.repeat(pos[None], len(s), axis=0), s
+    j = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1)
     frac = (s - cum[j]) / np.maximum(length[j], 1e-12)
     return poly[j] + np.clip(frac, 0.0, 1.0)[:, None] * seg[j], s
 

@@ -144,9 +144,9 @@ class _Walkers:
     waited: np.ndarray  # (N,) s: how long the pedestrian has put off walking off, for someone passing close
     skipped: list[list[int]]  # per pedestrian: the routine stops (indices into Intent.route()) it gave up
     gave_up: np.ndarray  # (N,) s: when it gave its routine up, stalled for good on its last leg (nan: never)
-    leader: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,) the group's leader (−1: none)
-    member: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (N,) place in its group (0: first)
-    abreast: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (N,) its slot beside the leader is free
+    leader: np.ndarray  # (N,) index of its group's leader (−1: it leads, or walks alone)
+    member: np.ndarray  # (N,) its place in its group (0: the leader, or alone)
+    abreast: np.ndarray  # (N,) bool: its slot beside the leader is free (checked every CHECK_EVERY frames)
 
 
 def _to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -240,6 +240,7 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
     toward = np.where(np.isnan(face), first, face)  # standing at its start object, or facing its way
     heading = np.arctan2(toward[:, 1] - pos[:, 1], toward[:, 0] - pos[:, 0])
     depart = np.array([i.depart_time for i in intents], dtype=np.float64)
+    leader = _groups(intents)
     w = _Walkers(
         pos=pos,
         vel=np.zeros((n, 2)),
@@ -269,10 +270,10 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         waited=np.zeros(n),
         skipped=[[] for _ in range(n)],
         gave_up=np.full(n, np.nan),
+        leader=leader,
+        member=np.array([(leader[:k] == leader[k]).sum() + 1 if leader[k] >= 0 else 0 for k in range(n)], np.int64),
+        abreast=np.ones(n, bool),
     )
-    w.leader, w.member, w.abreast = _groups(intents), np.zeros(n, np.int64), np.ones(n, bool)
-    for lead in np.unique(w.leader[w.leader >= 0]):
-        w.member[w.leader == lead] = np.arange(1, int((w.leader == lead).sum()) + 1)
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
     return w, failures
@@ -300,11 +301,7 @@ def _formation(w: _Walkers, mesh: Navmesh, rows: np.ndarray, moving: np.ndarray,
         return
     where = np.full(len(w.pos), -1, dtype=np.int64)
     where[rows] = np.arange(len(rows))
-    velocities, preferred, limits = (
-        inputs[1],
-        inputs[2],
-        inputs[4],
-    )  # (positions, velocities, preferred, radii, limits, held)
+    _, velocities, preferred, _, limits, _ = inputs
     lag: dict[int, float] = {}
     for k in followers:
         lead = int(w.leader[k])
@@ -642,11 +639,12 @@ def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfi
     xy[:, 0], yaw[:, 0] = w.pos, w.heading
     turn = FACE_TURN_RATE / cfg.fps
     queues = Queues(find_passages(mesh, cfg.agent_radius_m), mesh, n) if cfg.queue_at_passages else None
+    grouped = bool((w.leader >= 0).any())
     frame = 0
     while frame < frames - 1 and not w.arrived.all():
         frame += 1
         t = frame / cfg.fps
-        if (w.leader >= 0).any():
+        if grouped:
             _hold_for_group(w, t)
         moving = walking(w.depart, w.arrived, w.yield_until, w.dwell_until, t)
         _wait_for_passers(w, moving, frame, cfg)
