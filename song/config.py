@@ -83,7 +83,18 @@ class CrowdConfig(_Section):
         "orca",
         description="local-avoidance model: an `avoidance` plugin (orca, social_force, or module:Class; docs/crowd.md)",
     )
-    agent_radius_m: float = Field(0.25, gt=0.0, le=1.0, description="pedestrian body radius, m")
+    agent_radius_m: float = Field(
+        0.25,
+        gt=0.0,
+        le=1.0,
+        description="navmesh clearance from walls and the largest body radius, m (everyone's body radius when "
+        "radius_from_avatar is false)",
+    )
+    radius_from_avatar: bool = Field(
+        True,
+        description="each pedestrian keeps others clear by its own avatar's body radius, scaled to its height "
+        "(at most agent_radius_m; docs/crowd.md)",
+    )
     comfort_distance_m: float = Field(
         1.0, ge=0.0, le=3.0, description="centre distance people keep when passing in open space, m (≥ 2 × radius)"
     )

@@ -146,6 +146,9 @@ class PedestrianStatus(BaseModel):
         default_factory=list,
         description="routine stops (indices into Intent.route()) given up because the way stayed blocked",
     )
+    body_radius_m: float | None = Field(
+        default=None, description="the body radius it kept others clear by, m (None: removed before it started)"
+    )
 
 
 _STATUS = TypeAdapter(dict[int, PedestrianStatus])

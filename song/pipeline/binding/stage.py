@@ -17,19 +17,22 @@ import numpy as np
 
 from song.datasets.avatars.asset import AvatarAsset, load_avatar
 from song.datasets.avatars.cache import MotionCache, write_compact_cache, write_materialized_cache
-from song.datasets.run import BindingRecord, Bindings, SceneFolder, write_bindings
+from song.datasets.run import BindingRecord, Bindings, SceneFolder, read_intents, write_bindings
 from song.datasets.run.layout import BINDINGS_FILE, CACHE_FILE, MATERIALIZED_FILE
+from song.errors import SongError
 from song.pipeline.binding.pool import ensure_pool
+from song.pipeline.bodies import identity_picks
 from song.pipeline.chain import StageContext
 from song.pipeline.motion.io import LoadedMotion, load_motion
 
 
-def sample_identities(n: int, pool_size: int, rng: np.random.Generator) -> list[int]:
-    """``n`` pool indices: successive random permutations of the pool, so repeats only once it is used up."""
-    order: list[int] = []
-    while len(order) < n:
-        order += rng.permutation(pool_size).tolist()
-    return order[:n]
+def _scene_ped_ids(scene: SceneFolder, motion_ids: list[int]) -> list[int]:
+    """Every pedestrian of the scene: its intents' ids (those the crowd could not start included) and the motions'."""
+    try:
+        intent_ids = [intent.id for intent in read_intents(scene.intents).intents]
+    except (OSError, SongError):
+        intent_ids = []
+    return sorted(set(intent_ids) | set(motion_ids))
 
 
 def _motions(scene: SceneFolder) -> list[LoadedMotion]:
@@ -73,10 +76,12 @@ def run_binding(ctx: StageContext) -> list[str]:
     if out_dir.exists():
         shutil.rmtree(out_dir)  # a rerun replaces the whole folder (no stale caches of removed pedestrians)
     out_dir.mkdir(parents=True)
-    picks = sample_identities(len(motions), len(pool), ctx.rng("identity"))
+    ped_ids = [int(motion.meta.get("ped_id", -1)) for motion in motions]
+    picks = identity_picks(ctx.config, ctx.scene_id, _scene_ped_ids(scene, ped_ids), len(pool))
     assets: dict[int, AvatarAsset] = {}
     entries, written = [], []
-    for motion, pick in zip(motions, picks, strict=True):
+    for motion, ped_id in zip(motions, ped_ids, strict=True):
+        pick = picks[ped_id]
         asset = assets.setdefault(pick, load_avatar(pool[pick]))
         scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)))
         ped_id = cache.meta["ped_id"]

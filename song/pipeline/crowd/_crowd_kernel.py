@@ -37,9 +37,9 @@ def near_walkers(pos: np.ndarray, moving: np.ndarray, reach: float) -> np.ndarra
 
 @numba.njit(cache=True, nogil=True)
 def overlap_push(
-    target: np.ndarray, moving: np.ndarray, min_dist: float
+    target: np.ndarray, moving: np.ndarray, radius: np.ndarray, margin: float
 ) -> tuple[np.ndarray, bool]:  # pragma: no cover
-    """Pushes (N, 2) m separating overlapping pairs to ``min_dist``, and whether any pair overlaps.
+    """Pushes (N, 2) m separating overlapping pairs to their bodies' radii + ``margin``, and whether any pair overlaps.
 
     A walker moves half the overlap with another walker and all of it with someone standing; a
     standing pedestrian is not pushed, so two people standing too close (one who gave up, stepped
@@ -56,7 +56,7 @@ def overlap_push(
                 continue
             dx, dy = target[i, 0] - target[j, 0], target[i, 1] - target[j, 1]
             dist = np.hypot(dx, dy)
-            overlap = min_dist - dist
+            overlap = radius[i] + radius[j] + margin - dist
             if overlap <= 0.0:
                 continue
             found = True
@@ -73,7 +73,7 @@ def preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, d
 
     Toward ``cur`` pulled early by ``nxt`` (``dir0 − dir1 · |dir0| / 2``, Detour's
     ``calcSmoothSteerDirection``) when the corner is not the goal; the speed falls linearly within
-    ``2 · radius`` of the goal and never overshoots it in one step ``dt``.
+    ``2 · radius`` (N,) of the goal and never overshoots it in one step ``dt``.
     """
     n = len(pos)
     pref = np.zeros((n, 2))
@@ -89,7 +89,7 @@ def preferred_velocities(pos, cur, nxt, has_next, goal, speed, moving, radius, d
         if has_next[i]:
             sx, sy = d0x - d1x * (0.5 * len0), d0y - d1y * (0.5 * len0)
         d_goal = np.hypot(goal[i, 0] - pos[i, 0], goal[i, 1] - pos[i, 1])
-        desired = speed[i] * min(1.0, d_goal / (2.0 * radius))
+        desired = speed[i] * min(1.0, d_goal / (2.0 * radius[i]))
         if not has_next[i]:
             desired = min(desired, len0 / dt)
         norm = max(np.hypot(sx, sy), 1e-9)
@@ -167,14 +167,15 @@ def _move(px, py, qx, qy, limit, stamp, tick, mesh):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True)
 def settle_moves(
-    pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, mesh, turn_limit=-1.0
+    pos, vel, rows, wanted, moving, speed, dt, accel_limit, radius, margin, passes, mesh, turn_limit=-1.0
 ):  # pragma: no cover
     """The frame's moves from the avoidance model's velocities: ``(new positions (N, 2), velocities (N, 2))``.
 
     ``wanted`` (M, 2) are the new velocities of pedestrians ``rows`` (M,); the others' are 0.
 
     In order: the acceleration limit (:func:`accelerate`); moves kept on the mesh and within the speed
-    limit (:func:`_move`); up to ``passes`` overlap resolution passes (:func:`overlap_push` within each
+    limit (:func:`_move`); up to ``passes`` overlap resolution passes (:func:`overlap_push`: bodies of
+    ``radius`` (N,) kept ``margin`` apart, within each
     walker's speed budget, again through :func:`_move`). Each move is final when the passes see it (a
     step shortened or cancelled after them could leave a follower pressed 1 cm into a walker stopped
     that way). Non-walkers stay put.
@@ -196,7 +197,7 @@ def settle_moves(
         target[i, 0], target[i, 1], tick = _move(pos[i, 0], pos[i, 1], pos[i, 0] + vx * dt, pos[i, 1] + vy * dt,
                                                  speed[i] * dt, stamp, tick, mesh)  # fmt: skip
     for _ in range(passes):
-        push, found = overlap_push(target, moving, min_dist)
+        push, found = overlap_push(target, moving, radius, margin)
         if not found:
             break
         for i in range(n):
@@ -267,7 +268,7 @@ def avoidance_inputs(
 
     The walkers and whoever stands within ``reach`` of one (others cannot change the answer).
     Returns ``(rows (M,), positions (M, 2), velocities (M, 2), preferred velocities (M, 2)``
-    (:func:`preferred_velocities`), ``body radii (M,), speed limits (M,)`` (0 for those standing),
+    (:func:`preferred_velocities`), ``body radii (M,)`` (of ``radius`` (N,)), ``speed limits (M,)`` (0 for those standing),
     ``held up (M,))``: seconds since each walker last made progress along its path (0 for those standing).
     """
     near = near_walkers(pos, moving, reach)
@@ -275,7 +276,7 @@ def avoidance_inputs(
     rows = np.nonzero(moving | near)[0]
     limits = np.where(moving, speed, 0.0)[rows]
     held = np.where(moving, np.maximum(frame * dt - last_progress, 0.0), 0.0)[rows]
-    return rows, pos[rows], vel[rows], pref[rows], np.full(len(rows), radius), limits, held
+    return rows, pos[rows], vel[rows], pref[rows], radius[rows], limits, held
 
 
 @numba.njit(cache=True, nogil=True)

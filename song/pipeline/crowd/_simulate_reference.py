@@ -13,12 +13,14 @@ def near_walkers_reference(pos: np.ndarray, moving: np.ndarray, reach: float) ->
     return (d < reach).any(axis=1)
 
 
-def overlap_push_reference(target: np.ndarray, moving: np.ndarray, min_dist: float) -> tuple[np.ndarray, bool]:
+def overlap_push_reference(
+    target: np.ndarray, moving: np.ndarray, radius: np.ndarray, margin: float
+) -> tuple[np.ndarray, bool]:
     """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.overlap_push` (all-pairs numpy)."""
     diff = target[:, None, :] - target[None, :, :]
     dist = np.hypot(diff[..., 0], diff[..., 1])
     np.fill_diagonal(dist, np.inf)
-    overlap = np.clip(min_dist - dist, 0.0, None)
+    overlap = np.clip(radius[:, None] + radius[None, :] + margin - dist, 0.0, None)
     share = np.where(moving[None, :], 0.5, 1.0)
     push = (diff / np.maximum(dist, 1e-9)[..., None] * (share * overlap)[..., None]).sum(axis=1)
     push[~moving] = 0.0
@@ -38,7 +40,7 @@ def preferred_velocities_reference(pos, cur, nxt, has_next, goal, speed, moving,
     dir1 /= np.maximum(np.hypot(dir1[:, 0], dir1[:, 1]), 1e-3)[:, None]
     steer = np.where(nxt_ok[:, None], dir0 - dir1 * (0.5 * len0)[:, None], dir0)
     d_goal = np.hypot(*(goal[idx] - p).T)
-    desired = speed[idx] * np.minimum(1.0, d_goal / (2.0 * radius))
+    desired = speed[idx] * np.minimum(1.0, d_goal / (2.0 * radius[idx]))
     desired = np.where(nxt_ok, desired, np.minimum(desired, len0 / dt))
     pref[idx] = steer / np.maximum(np.hypot(steer[:, 0], steer[:, 1]), 1e-9)[:, None] * desired[:, None]
     return pref
@@ -70,7 +72,7 @@ def _move_reference(mesh, pos: np.ndarray, target: np.ndarray, limit: np.ndarray
 
 
 def settle_moves_reference(
-    mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, min_dist, passes, turn_limit=-1.0
+    mesh, pos, vel, rows, wanted, moving, speed, dt, accel_limit, radius, margin, passes, turn_limit=-1.0
 ):
     """Reference twin of :func:`song.pipeline.crowd._crowd_kernel.settle_moves` (numpy and navmesh calls).
 
@@ -87,7 +89,7 @@ def settle_moves_reference(
     if len(rows):
         target[rows] = _move_reference(mesh, pos[rows], pos[rows] + new_vel[rows] * dt, max_step[rows])
     for _ in range(passes):
-        push, found = overlap_push_reference(target, moving, min_dist)
+        push, found = overlap_push_reference(target, moving, radius, margin)
         if not found:
             break
         step = target + push - pos

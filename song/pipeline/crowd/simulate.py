@@ -147,6 +147,7 @@ class _Walkers:
     leader: np.ndarray  # (N,) index of its group's leader (−1: it leads, or walks alone)
     member: np.ndarray  # (N,) its place in its group (0: the leader, or alone)
     abreast: np.ndarray  # (N,) bool: its slot beside the leader is free (checked every CHECK_EVERY frames)
+    radius: np.ndarray  # (N,) body radius, m (at most the navmesh's agent radius)
 
 
 def _to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -198,12 +199,14 @@ def _nearest_on_outline(outline: np.ndarray | None, point: np.ndarray) -> np.nda
     return nearest_on_outline(outline, point[None])[0][0]
 
 
-def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.ndarray, outlines: dict[str, np.ndarray]):
+def _start(
+    intents: list[Intent], mesh: Navmesh, jitter: np.ndarray, outlines: dict[str, np.ndarray], radius: np.ndarray
+):  # fmt: skip
     """Snapped, jittered starts; every leg's goal snapped; first paths. Returns (walkers, failures {index: reason}).
 
     ``jitter`` (N, 2) m: each pedestrian's own start offset (drawn once per intent, so whom else the
     crowd keeps never changes it). ``outlines``: object footprints by id; someone standing at its start
-    object or at a leg's faces the nearest point of its outline.
+    object or at a leg's faces the nearest point of its outline. ``radius`` (N,): body radii, m.
     """
     n = len(intents)
     raw = np.array([i.start_xy for i in intents], dtype=np.float64).reshape(n, 2)
@@ -231,7 +234,7 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
             failures[k] = "goal is not reachable on the navmesh"
         paths.append(path if path is not None else goal[k : k + 1].copy())
     d = _length(pos[:, None] - pos[None]) + np.triu(np.full((n, n), np.inf))
-    for k, j in zip(*np.nonzero(d < 2 * cfg.agent_radius_m), strict=True):  # too crowded to stand there
+    for k, j in zip(*np.nonzero(d < radius[:, None] + radius[None]), strict=True):  # too crowded to stand there
         if k not in failures and j not in failures:
             failures[int(k)] = f"start overlaps pedestrian {intents[int(j)].id}"
     first = np.array([p[0] for p in paths]).reshape(n, 2)
@@ -273,6 +276,7 @@ def _start(intents: list[Intent], mesh: Navmesh, cfg: CrowdConfig, jitter: np.nd
         leader=leader,
         member=np.array([(leader[:k] == leader[k]).sum() + 1 if leader[k] >= 0 else 0 for k in range(n)], np.int64),
         abreast=np.ones(n, bool),
+        radius=radius,
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
@@ -488,7 +492,7 @@ def _step_frame(
     w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, moving: np.ndarray, cfg: CrowdConfig, frame: int,
     queues: Queues | None,
 ):  # fmt: skip
-    dt, r = 1.0 / cfg.fps, cfg.agent_radius_m
+    dt, r = 1.0 / cfg.fps, w.radius
     if not moving.any():
         w.vel = np.zeros_like(w.vel)
         return
@@ -501,7 +505,7 @@ def _step_frame(
         # waiting, or following others through, is not being stuck (for a while)
         w.last_progress[queues.patient(frame * dt) & moving] = frame * dt
     # avoidance for the walkers and whoever stands within their neighbour distance (others cannot change the answer)
-    reach = max(avoid.neighbor_dist, 2 * r + SEPARATION_REACH_M)
+    reach = max(avoid.neighbor_dist, 2 * float(r.max()) + SEPARATION_REACH_M)
     rows, *inputs = avoidance_inputs(
         w.pos, w.vel, cur, nxt, has_next, goal, w.speed, moving, r, dt, reach, frame, w.last_progress,
     )  # fmt: skip
@@ -509,7 +513,7 @@ def _step_frame(
         _formation(w, mesh, rows, moving, inputs, frame % CHECK_EVERY == 0)
     new_vel = avoid.velocities(*inputs)
     w.pos, w.vel = settle_moves(
-        w.pos, w.vel, rows, new_vel, moving, w.speed, dt, cfg.max_accel_mps2 * dt, 2 * r + OVERLAP_MARGIN_M, OVERLAP_PASSES,
+        w.pos, w.vel, rows, new_vel, moving, w.speed, dt, cfg.max_accel_mps2 * dt, r, OVERLAP_MARGIN_M, OVERLAP_PASSES,
         mesh.move_args(), cfg.turn_accel_mps2 * dt,
     )  # fmt: skip
 
@@ -671,6 +675,7 @@ def plan_crowd(
     cfg: CrowdConfig,
     rng: np.random.Generator,
     outlines: dict[str, np.ndarray] | None = None,
+    radii: dict[int, float] | None = None,
 ) -> CrowdPlan:
     """Simulate all pedestrians jointly; those that cannot start are left out with a reason.
 
@@ -683,6 +688,9 @@ def plan_crowd(
         outlines: footprints (K, 2) of the scene's objects by id: someone standing at its start object
             or at a stop turns to face the nearest point of that object's outline (a person waits at a
             counter facing it); without one it keeps the heading it arrived with.
+        radii: body radius by pedestrian id, m (:func:`song.pipeline.bodies.body_radii`), at most
+            ``cfg.agent_radius_m`` (the navmesh's clearance from walls); missing ids take
+            ``cfg.agent_radius_m``. Bodies keep clear of each other by their own radii.
     """
     jitter = _jitter(intents, cfg, rng)
     lead = _lead_in_frames(intents, cfg.fps)  # the simulation's clock starts at the earliest departure
@@ -691,9 +699,10 @@ def plan_crowd(
         intents = [i.model_copy(update={"depart_time": i.depart_time + shift}) for i in intents]
         cfg = cfg.model_copy(update={"max_duration_s": cfg.max_duration_s + shift})
     kept = np.arange(len(intents))
+    radius = np.array([_body_radius(radii, i.id, cfg) for i in intents], dtype=np.float64)
     status: dict[int, dict] = {}
     while len(kept):  # leaving one out can change another's start (overlaps), so check again
-        w, failures = _start([intents[k] for k in kept], mesh, cfg, jitter[kept], outlines or {})
+        w, failures = _start([intents[k] for k in kept], mesh, jitter[kept], outlines or {}, radius[kept])
         for k, reason in sorted(failures.items()):
             status[intents[kept[k]].id] = {
                 "status": "removed",
@@ -710,10 +719,20 @@ def plan_crowd(
         )
     xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
     for row, k in enumerate(kept):
-        status[intents[k].id] = _outcome(w, row, cfg, shift)
+        status[intents[k].id] = {**_outcome(w, row, cfg, shift), "body_radius_m": round(float(radius[k]), 6)}
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
     span = slice(min(lead, xy.shape[1] - 1), None)  # the scenario: from t = 0 on
     return CrowdPlan(ids, xy[:, span].copy(), yaw[:, span].copy(), speed[:, span].copy(), cfg.fps, status)
+
+
+def _body_radius(radii: dict[int, float] | None, ped_id: int, cfg: CrowdConfig) -> float:
+    """Pedestrian ``ped_id``'s body radius: its own where given (never above the navmesh's), else the configured one."""
+    if radii is None or ped_id not in radii:
+        return cfg.agent_radius_m
+    radius = float(radii[ped_id])
+    if not 0.0 < radius <= cfg.agent_radius_m + 1e-9:
+        raise ValueError(f"body radius {radius} m of pedestrian {ped_id} is not in (0, {cfg.agent_radius_m}]")
+    return radius
 
 
 def _outcome(w: _Walkers, k: int, cfg: CrowdConfig, shift: float) -> dict:

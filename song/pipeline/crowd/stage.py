@@ -9,6 +9,7 @@ import numpy as np
 
 from song.datasets.run import SceneFolder, crowd_table, read_intents, write_crowd, write_crowd_status
 from song.datasets.run.layout import CROWD_FILE, CROWD_STATUS_FILE, NAVMESH_FILE
+from song.pipeline.bodies import body_radii
 from song.pipeline.chain import StageContext, StageOutput
 from song.pipeline.crowd.avoidance import make_avoidance
 from song.pipeline.crowd.navmesh import save_navmesh, scene_navmesh
@@ -27,7 +28,11 @@ def run_crowd(ctx: StageContext) -> StageOutput:
     cfg = ctx.config.crowd
     mesh = scene_navmesh(ctx.scene, cfg.agent_radius_m, cfg.contour_error_m)
     outlines = {obj.id: np.asarray(obj.footprint, dtype=np.float64) for obj in ctx.scene.semantic_map.objects}
-    plan = plan_crowd(intents.intents, mesh, make_avoidance(mesh, cfg), cfg, ctx.rng("crowd"), outlines=outlines)
+    radii = None
+    if cfg.radius_from_avatar and intents.intents:
+        radii = body_radii(ctx.config, ctx.scene_id, [intent.id for intent in intents.intents])
+    avoid = make_avoidance(mesh, cfg)
+    plan = plan_crowd(intents.intents, mesh, avoid, cfg, ctx.rng("crowd"), outlines=outlines, radii=radii)
     table = plan_table(plan)
     save_navmesh(scene.navmesh, mesh)
     write_crowd(scene.crowd, table)

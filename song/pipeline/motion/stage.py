@@ -13,6 +13,7 @@ from song.config import MotionConfig
 from song.datasets.run import SceneFolder, read_crowd_table, read_intents, traj_dir_name
 from song.errors import SongError
 from song.geometry.skeleton import JOINT_NAMES, PARENTS
+from song.pipeline.bodies import motion_seed
 from song.pipeline.chain import StageContext
 from song.pipeline.motion.amass import HAND_SLOTS, pelvis_j0
 from song.pipeline.motion.generators import MotionGenerator, ProceduralGait, make_generator
@@ -164,7 +165,7 @@ def run_motion(ctx: StageContext) -> list[str]:
     scene = SceneFolder(ctx.scene_dir)
     trajectories = read_trajectories(scene.crowd)
     ids = [traj.ped_id for traj in trajectories]
-    seeds = [int(ctx.rng(ped_id).integers(0, 2**63 - 1)) for ped_id in ids]
+    seeds = [motion_seed(ctx.config, ctx.scene_id, ped_id) for ped_id in ids]
     intents = _intents_by_id(scene)
     trajectories = with_stays(trajectories, intents, ctx.scene.semantic_map.object_by_id())
     activities = [intents[i].activity if i in intents else "" for i in ids]

@@ -19,7 +19,8 @@ from song.datasets.avatars.cache import (
 from song.datasets.scenes import load_scene_package
 from song.geometry.lbs import lbs
 from song.geometry.skeleton import JOINT_INDEX
-from song.pipeline.binding import run_binding, sample_identities
+from song.pipeline.binding import run_binding
+from song.pipeline.bodies import identity_picks
 from song.pipeline.chain import StageContext
 from song.pipeline.motion import load_motion, run_motion
 from tests.avatar_factory import capsule_avatar
@@ -64,9 +65,11 @@ def test_contract_identities_and_determinism(make_scene, tmp_path, pool) -> None
 
 
 def test_identity_sampling_cycles_through_permutations() -> None:
-    rng = np.random.default_rng(0)
-    picks = sample_identities(10, 4, rng)
-    assert sorted(picks[:4]) == [0, 1, 2, 3] and sorted(picks[4:8]) == [0, 1, 2, 3]
+    config = SongConfig(seed=3)
+    picks = identity_picks(config, "tiny", [12, 3, 7, 1, 0, 9, 4, 5, 30, 2], 4)
+    order = [picks[i] for i in sorted(picks)]
+    assert sorted(order[:4]) == [0, 1, 2, 3] and sorted(order[4:8]) == [0, 1, 2, 3]
+    assert identity_picks(config, "tiny", [0, 1, 2], 4) == {i: order[i] for i in range(3)}  # a prefix, by id
 
 
 def _dominant(asset, joint: str) -> np.ndarray:

@@ -27,9 +27,12 @@ def test_crowd_invariants(sample_run: Path, scene: str) -> None:
     scene_dir = sample_run / "scenes" / scene
     crowd = read_crowd(scene_dir)
     assert crowd.xy.shape[0] >= 2
+    status = read_crowd_status(scene_dir)
+    radius = np.array([status[int(i)].body_radius_m for i in crowd.ids])
+    assert ((radius > 0.15) & (radius <= R)).all() and radius.std() > 0  # bodies of their own sizes
     d = np.linalg.norm(crowd.xy[:, None] - crowd.xy[None], axis=-1)
     d[np.arange(len(d)), np.arange(len(d))] = np.inf
-    assert d.min() >= 2 * R - 0.01
+    assert (d - (radius[:, None] + radius[None])[..., None]).min() >= -0.01  # bodies never overlap
     walk = walkable(load_scene_package(SAMPLES / scene), R, SongConfig().crowd.contour_error_m)
     assert walk.on_main(crowd.xy.reshape(-1, 2)).all()
     assert load_navmesh(scene_dir).contains(crowd.xy.reshape(-1, 2), tol=1e-6).all()  # on the navmesh

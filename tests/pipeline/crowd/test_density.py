@@ -88,19 +88,21 @@ def test_compiled_pair_loops_equal_their_reference_twins() -> None:
         moving = rng.random(n) < 0.6
         for reach in (0.4, 1.5):
             np.testing.assert_array_equal(near_walkers(pos, moving, reach), near_walkers_reference(pos, moving, reach))
-        push, found = overlap_push(pos, moving, 0.6)
-        ref, ref_found = overlap_push_reference(pos, moving, 0.6)
+        radius = rng.uniform(0.15, 0.3, n)  # bodies of their own sizes
+        push, found = overlap_push(pos, moving, radius, 0.0)
+        ref, ref_found = overlap_push_reference(pos, moving, radius, 0.0)
         np.testing.assert_allclose(push, ref, atol=1e-12)
         assert found == ref_found
         # two people standing too close push nobody, so they do not keep the overlap passes going
         standing_pair = np.array([[0.0, 0.0], [0.3, 0.0], [3.0, 0.0]])
         for pushes in (overlap_push, overlap_push_reference):
-            assert not pushes(standing_pair, np.array([False, False, True]), 0.6)[1]
-            assert pushes(standing_pair, np.array([True, False, True]), 0.6)[1]
+            assert not pushes(standing_pair, np.array([False, False, True]), np.full(3, 0.3), 0.0)[1]
+            assert pushes(standing_pair, np.array([True, False, True]), np.full(3, 0.3), 0.0)[1]
+            assert not pushes(standing_pair, np.array([True, False, True]), np.array([0.1, 0.15, 0.3]), 0.0)[1]
         cur, nxt, goal = (pos + rng.normal(0, 2.0, (n, 2)) for _ in range(3))
         has_next, speed = rng.random(n) < 0.5, rng.uniform(0.5, 1.5, n)
         goal[:2] = pos[:2] + 0.1  # slowing down at the goal
-        args = (pos, cur, nxt, has_next, goal, speed, moving, 0.25, 1 / 30)
+        args = (pos, cur, nxt, has_next, goal, speed, moving, radius, 1 / 30)
         np.testing.assert_allclose(preferred_velocities(*args), preferred_velocities_reference(*args), atol=1e-12)
 
 
@@ -109,7 +111,7 @@ def test_compiled_frame_moves_equal_their_reference_twin(make_scene) -> None:
     mesh = scene_navmesh(load_scene_package(make_scene(door=1.0)), R, CFG.contour_error_m)
     rng = np.random.default_rng(3)
     tri = mesh.vertices[mesh.triangles]
-    dt, limit, min_dist = 1 / 30, CFG.max_accel_mps2 / 30, 2 * R + 0.002
+    dt, limit = 1 / 30, CFG.max_accel_mps2 / 30
     checked = 0
     for n in (1, 6, 30):
         for _ in range(20):
@@ -120,7 +122,8 @@ def test_compiled_frame_moves_equal_their_reference_twin(make_scene) -> None:
             rows = np.flatnonzero(moving | (rng.random(n) < 0.2))
             wanted = rng.normal(0, 1.5, (len(rows), 2))
             speed = rng.uniform(0.5, 1.8, n)
-            args = (pos, vel, rows, wanted, moving, speed, dt, limit, min_dist, 3)
+            radius = rng.uniform(0.7 * R, R, n)
+            args = (pos, vel, rows, wanted, moving, speed, dt, limit, radius, 0.002, 3)
             new_pos, new_vel = settle_moves(*args, mesh.move_args())
             ref_pos, ref_vel = settle_moves_reference(mesh, *args)
             np.testing.assert_allclose(new_pos, ref_pos, rtol=0, atol=1e-12)  # the pair loop sums in another order
@@ -153,7 +156,8 @@ def test_a_walker_whose_step_is_cancelled_is_not_walked_into(tmp_path) -> None:
         speed,
         dt,
         CFG.max_accel_mps2 * dt,
-        2 * R + 0.002,
+        np.full(2, R),
+        0.002,
         5,
     )
     new_pos, _ = settle_moves(*args, mesh.move_args())

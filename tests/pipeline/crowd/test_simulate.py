@@ -156,7 +156,8 @@ def test_a_walker_still_under_way_when_the_scenario_ends_times_out(make_scene) -
     plan = plan_crowd(intents, mesh, make_avoidance(mesh, cfg), cfg, derive_rng(0, "tiny", "crowd"))
     assert plan.status[1]["status"] == "arrived"
     assert plan.status[0] == {
-        "status": "timeout", "reason": "did not arrive within 4 s", "arrival_s": None, "skipped_stops": []
+        "status": "timeout", "reason": "did not arrive within 4 s", "arrival_s": None, "skipped_stops": [],
+        "body_radius_m": R,
     }  # fmt: skip
     assert (plan.xy.shape[1] - 1) / plan.fps == pytest.approx(4.0, abs=1 / plan.fps)  # cut at the limit
 
