@@ -229,3 +229,38 @@ def test_compiled_buckets_and_cell_keys_match_their_numpy_twins() -> None:
     step[np.arange(len(pos)), bucket // 2] = lit.DEPTH_M
     cell = np.clip(np.floor((pos - lo) / step).astype(np.int64), 0, dims - 1)
     np.testing.assert_array_equal(lit.cell_keys(pos, bucket, h, lo, dims), lit._encode(cell, bucket, dims))
+
+
+def test_texel_hash_lookup_matches_a_binary_search() -> None:
+    """The texels' key table finds exactly what a search of the sorted keys finds (absent and negative keys too)."""
+    from song.datasets.scenes import lighting as lit
+
+    rng = np.random.default_rng(1)
+    keys = np.unique(rng.integers(0, 10**9, 40_000))
+    slots = lit._key_table(keys)
+    queries = np.concatenate([keys[rng.integers(0, len(keys), 20_000)], rng.integers(-(10**6), 10**9, 20_000)])
+    k = np.minimum(np.searchsorted(keys, queries), len(keys) - 1)
+    np.testing.assert_array_equal(lit._find_all(keys, slots, queries), np.where(keys[k] == queries, k, -1))
+    assert len(slots) >= 2 * len(keys) and (np.sort(slots[slots >= 0]) == np.arange(len(keys))).all()
+
+
+def test_ray_queries_split_over_threads_equal_one_query(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Embree queries cut into slices on several threads give every ray the answer one query gives."""
+    import numba
+
+    from song.datasets.scenes import lighting as lit
+
+    rng = np.random.default_rng(2)
+    tracer = lit.Tracer(rng.uniform(0, 4, (3000, 3, 3)))
+    origins = rng.uniform(0, 4, (5000, 3))
+    dirs = rng.normal(size=(5000, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dists = rng.uniform(0.1, 3.0, 5000)
+    whole = tracer.occluded(origins, dirs, dists), tracer.intersect(origins, dirs)
+    monkeypatch.setattr(lit, "PARALLEL_RAYS", 1000)
+    monkeypatch.setattr(numba, "get_num_threads", lambda: 3)  # three uneven slices
+    split = tracer.occluded(origins, dirs, dists), tracer.intersect(origins, dirs)
+    assert whole[0].any() and not whole[0].all()
+    np.testing.assert_array_equal(whole[0], split[0])
+    for a, b in zip(whole[1], split[1], strict=True):
+        np.testing.assert_array_equal(a, b)
