@@ -23,7 +23,8 @@ exposure, then the sRGB transfer). E has three parts:
   scales this indirect part.
 
 Emitting surfaces are drawn, not lit: surfels inside a light's rectangle (a window's glazing on the
-wall, a ceiling panel on the ceiling, inset by a 5 cm frame) show its radiance. Every step is
+wall, a ceiling panel on the ceiling: the whole rectangle that emits, as a renderer shows an area
+light) show its radiance. Every step is
 deterministic (fixed ray patterns; a ray's answer does not depend on how the casts are split over
 threads), so a bake is byte-identical whatever the worker and thread count.
 
@@ -51,7 +52,6 @@ BOUNCES = 32  # at most; the gather stops when a bounce adds under BOUNCE_TOLERA
 BOUNCE_TOLERANCE = 0.005
 PROBE_SPACING_M, PROBE_HEIGHT_M, PROBE_RAYS = 0.5, 1.0, 48
 RAY_OFFSET_M = 0.02  # ray origins leave the surface along its normal by this much
-FRAME_M = 0.05  # a light's rectangle drawn inset by this frame
 MIDDLE_GREY = 0.18  # auto exposure: the median surface radiance maps to this
 DEPTH_M = 0.02  # texel cells' depth along their normal axis
 MINOR_SHARE = 0.01  # lights under this share of a texel's unshadowed light cast no shadow ray from it
@@ -460,7 +460,8 @@ class Tracer:
         dirs = np.ascontiguousarray(dirs, dtype=np.float32)
         dists = np.ascontiguousarray(dists, dtype=np.float32)
         hit = self._split(
-            lambda sl: np.asarray(self._scene.run(origins[sl], dirs[sl], query="OCCLUDED", dists=dists[sl])), len(origins)
+            lambda sl: np.asarray(self._scene.run(origins[sl], dirs[sl], query="OCCLUDED", dists=dists[sl])),
+            len(origins),
         )
         return hit >= 0
 
@@ -482,7 +483,6 @@ class Tracer:
         ng = np.where(np.sum(ng * dirs, axis=1, keepdims=True) > 0, -ng, ng)
         return t, hit, ng
 
-
     @staticmethod
     def _split(trace, n: int) -> np.ndarray:
         """``trace(slice)`` over ``n`` rays, in contiguous slices on numba's threads when there are many."""
@@ -493,7 +493,8 @@ class Tracer:
 
         bounds = np.linspace(0, n, parts + 1).astype(int)
         with ThreadPoolExecutor(parts) as pool:
-            return np.concatenate(list(pool.map(trace, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])])))
+            slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+            return np.concatenate(list(pool.map(trace, slices)))
 
 
 def _hemisphere(count: int) -> np.ndarray:
@@ -571,7 +572,7 @@ class Bake:
 
 
 def emissive_mask(pos: np.ndarray, normals: np.ndarray, table: LightTable) -> tuple[np.ndarray, np.ndarray]:
-    """Surfels drawn as a light's face: within 3 cm behind a rect light, inside it less a frame; (mask, light)."""
+    """Surfels drawn as a light's face: within 3 cm behind a rect light and inside its rectangle; (mask, light)."""
     which = _emitters(pos, normals, table.kind, table.centre, table.u, table.v, table.n, table.half)
     return which >= 0, which
 
@@ -591,7 +592,7 @@ def _emitters(pos, normals, kind, centre, u, v, n, half):
                 continue
             du = abs(dx * u[j, 0] + dy * u[j, 1] + dz * u[j, 2])
             dv = abs(dx * v[j, 0] + dy * v[j, 1] + dz * v[j, 2])
-            if du < half[j, 0] - FRAME_M and dv < half[j, 1] - FRAME_M:
+            if du < half[j, 0] and dv < half[j, 1]:
                 which[i] = j
     return which
 

@@ -46,6 +46,7 @@ SPACING_M = SURFEL_SPACING_M  # default surfel spacing (song.config, where the C
 WIDTH_FACTOR = 0.6  # in-plane σ as a fraction of the local spacing (no holes from 0.3 m; edges bleed ≈ ½ spacing)
 THIN_FACTOR = 0.06  # σ along the normal as a fraction of the local spacing
 JITTER = 0.2  # sample positions jitter by this fraction of the spacing
+EDGE_FACTOR = 0.7  # an object face's outermost samples: σ across its edge × this (α ≈ 0.5 on the edge, as a true edge)
 OPACITY_LOGIT = 5.0  # sigmoid(5) = 0.993
 LIGHT = np.array([0.35, 0.5, 0.79]) / np.linalg.norm([0.35, 0.5, 0.79])
 AMBIENT, DIFFUSE = 0.72, 0.28
@@ -107,7 +108,7 @@ def _face_grid(lu: np.ndarray, lv: np.ndarray, spacing: float) -> tuple[np.ndarr
     return np.maximum(1, np.round(lu / su)).astype(np.int64), np.maximum(1, np.round(lv / sv)).astype(np.int64)
 
 
-def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples:
+def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng, sharp: bool = True) -> _Samples:
     """Jittered grid samples on F planar rectangles ``origin + u·eu + v·ev`` (u ∈ [0, lu], v ∈ [0, lv]).
 
     Args:
@@ -120,6 +121,10 @@ def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples
         ao_floor: (F,) bool: darken toward the floor (vertical faces standing on it).
         spacing: target sample spacing, m.
         rng: jitter source.
+        sharp: the outermost row and column of samples are narrower across the face's edge
+            (:data:`EDGE_FACTOR`), so an object's outline does not bleed half a spacing into what lies
+            behind it (a desk's legs and a monitor read as wide as they are). Walls keep full samples:
+            their edges meet the floor, the ceiling and the other walls.
     """
     f = len(lu)
     if f == 0:
@@ -142,7 +147,11 @@ def _faces(origin, eu, ev, lu, lv, material, ao_floor, spacing, rng) -> _Samples
     ao[down] = 0.6  # undersides (table tops, shelves, lintels) face the floor
     uv = np.column_stack([u + origin[face] @ np.array([1.0, 0.7, 0.3]), v + origin[face, 2]])
     quat = frame_quats(eu, ev, normal_f)[face]  # one rotation per face
-    return _Samples(pos, quat, normal, WIDTH_FACTOR * du, WIDTH_FACTOR * dv, uv, _codes(material)[face], ao)
+    s1, s2 = WIDTH_FACTOR * du, WIDTH_FACTOR * dv
+    if sharp:
+        s1 = np.where((i == 0) | (i == nu[face] - 1), EDGE_FACTOR * s1, s1)
+        s2 = np.where((j == 0) | (j == nv[face] - 1), EDGE_FACTOR * s2, s2)
+    return _Samples(pos, quat, normal, s1, s2, uv, _codes(material)[face], ao)
 
 
 def _box_faces(parts: list[Part]) -> tuple:
@@ -262,7 +271,18 @@ def _walls(d: Dressing, spacing: float, rng) -> _Samples:
     ez = np.tile([0.0, 0.0, 1.0], (len(a), 1))
     h = np.full(len(a), d.ceiling_height)
     run = length + reach.sum(axis=1)
-    s = _faces(origin, eu, ez, run, h, np.full(len(a), d.wall_material, object), np.zeros(len(a), bool), spacing, rng)
+    s = _faces(
+        origin,
+        eu,
+        ez,
+        run,
+        h,
+        np.full(len(a), d.wall_material, object),
+        np.zeros(len(a), bool),
+        spacing,
+        rng,
+        sharp=False,
+    )
     # which face each sample is on, and where along its edge (run-on samples lie outside [0, length])
     face = np.repeat(np.arange(len(a)), np.prod(_face_grid(run, h, spacing), axis=0))
     along = np.einsum("ij,ij->i", s.pos - np.column_stack([a, np.zeros(len(a))])[face], eu[face])
