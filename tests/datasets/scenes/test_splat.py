@@ -363,3 +363,32 @@ def test_inside_corners_have_no_seam(office: Path) -> None:
         if np.median(out.depth[60:180, 157:163]) < 1.6:  # the corner itself in view (no furniture before it)
             worst.append(float(strip.min()))
     assert worst and min(worst) >= 0.8, worst
+
+
+def _coverage(s, points: np.ndarray) -> np.ndarray:
+    """Alpha of the surfels ``s`` (one face in the z = 0 plane, axis-aligned) at points (M, 2), as the renderer composes it."""
+    from song.datasets.scenes.splat import OPACITY_LOGIT
+
+    o = 1.0 / (1.0 + np.exp(-OPACITY_LOGIT))
+    d = points[:, None, :] - s.pos[None, :, :2]
+    a = np.minimum(0.999, o * np.exp(-0.5 * ((d[..., 0] / s.s1) ** 2 + (d[..., 1] / s.s2) ** 2)))
+    return 1.0 - np.prod(1.0 - np.where(a >= 1 / 255, a, 0.0), axis=1)
+
+
+def test_an_objects_outline_does_not_bleed_past_its_edge() -> None:
+    """A face's outermost surfels are narrower across its edge: α near ½ on the edge (a true edge covers half a
+    pixel there), nearly none half a spacing outside it; walls keep full-width surfels (they meet other surfaces)."""
+    from song.datasets.scenes.splat import SPACING_M, _faces
+
+    rng = np.random.default_rng(0)
+    args = (np.zeros((1, 3)), np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]), np.array([0.7]), np.array([0.7]),
+            np.array(["wood_medium"], object), np.array([False]), SPACING_M)  # fmt: skip
+    sharp, full = _faces(*args, rng), _faces(*args, np.random.default_rng(0), sharp=False)
+    h = SPACING_M
+    line = np.column_stack([np.linspace(-h, h, 41), np.full(41, 0.35)])  # across the edge at u = 0
+    cover = _coverage(sharp, line)
+    assert 0.3 <= cover[20] <= 0.6  # on the edge
+    assert cover[10] <= 0.05  # half a spacing outside
+    assert cover[30:].min() >= 0.85  # from half a spacing in: no seam along the edge row (a surface lets ~5 % through)
+    bleed = _coverage(full, line)
+    assert bleed[10] > 0.15 and bleed[20] > 0.6  # full-width surfels (walls) do bleed: the rule is what fixes objects
