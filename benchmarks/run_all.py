@@ -37,8 +37,19 @@ BENCHMARKS: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "orca": (["orca.py"], ()),
     "crowd": (["crowd.py"], ()),
     "crowd_realism": (
-        ["crowd_realism.py", "--generated", "20", "--avoidance", "orca", "--speed-profile", "paper", "human",
-         "--seeds", *[str(s) for s in range(1, 13)], "--markdown"],
+        [
+            "crowd_realism.py",
+            "--generated",
+            "20",
+            "--avoidance",
+            "orca",
+            "--speed-profile",
+            "paper",
+            "human",
+            "--seeds",
+            *[str(s) for s in range(1, 13)],
+            "--markdown",
+        ],
         (),
     ),  # fmt: skip
     "crowd_density": (["crowd_density.py"], ()),
@@ -60,7 +71,10 @@ BENCHMARKS: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "people": (["people.py", "--bench", DEMO, "--body", "80", "--faces", "48"], ("demo",)),
     "teleop": (["teleop.py", "--bench", DEMO, "--episode", "procthor_house_6-001"], ("demo",)),
     "gpu": (["gpu.py"], ("gpu",)),
-    "e2e_60": (["e2e.py", "--scenes", "60", "--episodes", "60", "--workers", "2", "--splat", "--out", "runs/e2e60"], ()),
+    "e2e_60": (
+        ["e2e.py", "--scenes", "60", "--episodes", "60", "--workers", "2", "--splat", "--out", "runs/e2e60"],
+        (),
+    ),
     "e2e_500": (
         ["e2e.py", "--scenes", "500", "--episodes", "500", "--workers", "2", "--splat", "--out", "runs/e2e500"],
         (),
@@ -101,7 +115,7 @@ def run_one(name: str, out: Path) -> dict:
     record = {
         "name": name,
         "command": " ".join(command),
-        "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "load_1min_before": round(os.getloadavg()[0], 2),
     }
     why = _missing(needs)
