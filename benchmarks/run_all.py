@@ -51,7 +51,7 @@ BENCHMARKS: dict[str, tuple[list[str], tuple[str, ...]]] = {
             "--markdown",
         ],
         (),
-    ),  # fmt: skip
+    ),
     "crowd_density": (["crowd_density.py"], ()),
     "motion": (["motion.py", "--quick"], ()),
     "postures": (["postures.py"], ()),
