@@ -1,8 +1,9 @@
 """The binding stage: motion → avatar identity + LBS cache per pedestrian.
 
 Per scene: every pedestrian with a motion (``human_amass/traj_{id}/motion.npz``) gets an identity from
-the pool, drawn with the scene's seeded generator (a fresh permutation of the pool each time it runs
-out, so no identity repeats within a scene while the pool allows), uniformly scaled to the motion's
+the pool, :func:`song.pipeline.bodies.identity_picks` over the scene's pedestrians in id order (a fresh
+permutation of the pool each time it runs out, so no identity repeats within a scene while the pool
+allows; the crowd stage asked the same function for the body radii), uniformly scaled to the motion's
 body height (the root alignment: ``diag(s, s, s, 1)``, recorded). Outputs under ``binding/``:
 ``traj_{id}.npz`` (compact cache), ``traj_{id}.materialized.npz`` when ``binding.materialize``, and
 ``bindings.json`` (contract in docs/contracts.md).
