@@ -83,6 +83,17 @@ def test_axis_rotations_and_yaw():
     assert np.allclose(r.wrap_angle(np.array([np.pi, -np.pi, 3 * np.pi + 0.1])), [-np.pi, -np.pi, -np.pi + 0.1])
 
 
+def test_wrap_angle_of_a_float_is_the_arrays_bit_for_bit() -> None:
+    """A Python float takes the plain-float path; its result is the array path's, bit for bit."""
+    rng = np.random.default_rng(0)
+    angles = np.concatenate(
+        [rng.normal(0, 10, 5000), rng.uniform(-1e4, 1e4, 5000), np.arange(-9, 10) * np.pi, [0.0, -0.0]]
+    )
+    scalar = np.array([r.wrap_angle(float(a)) for a in angles])
+    assert all(type(r.wrap_angle(float(a))) is float for a in angles[:5])
+    np.testing.assert_array_equal(scalar.view(np.int64), r.wrap_angle(angles).view(np.int64))
+
+
 def test_slerp_endpoints_midpoint_and_shorter_arc():
     a, b = Q[:100], Q[100:200]
     assert np.abs(r.quat_positive(r.quat_slerp(a, b, 0.0)) - r.quat_positive(a)).max() < 1e-12
