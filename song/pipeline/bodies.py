@@ -23,12 +23,12 @@ import numpy as np
 
 from song.config import SongConfig
 from song.errors import FormatError
-from song.util import derive_rng
+from song.pipeline.chain import stage_rng
 
 
 def motion_seed(config: SongConfig, scene_id: str, ped_id: int) -> int:
     """The seed of pedestrian ``ped_id``'s motion (its gait style and height), as the motion stage draws it."""
-    return int(derive_rng(config.seed, scene_id, "motion", ped_id).integers(0, 2**63 - 1))
+    return int(stage_rng(config, scene_id, "motion", ped_id).integers(0, 2**63 - 1))
 
 
 def body_height(config: SongConfig, scene_id: str, ped_id: int) -> float:
@@ -45,7 +45,7 @@ def identity_picks(config: SongConfig, scene_id: str, ped_ids: Sequence[int], po
     (every pedestrian the crowd could keep), so a pedestrian's identity does not depend on whether
     another one could start.
     """
-    rng = derive_rng(config.seed, scene_id, "binding", "identity")
+    rng = stage_rng(config, scene_id, "binding", "identity")
     order: list[int] = []
     ids = sorted(int(i) for i in ped_ids)
     while len(order) < len(ids):

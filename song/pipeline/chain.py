@@ -59,6 +59,15 @@ PLUGINS_ENV = "SONG_STAGE_PLUGINS"
 Status = Literal["ok", "skipped", "failed"]
 
 
+def stage_rng(config: SongConfig, scene_id: str, stage: str, *item: object) -> np.random.Generator:
+    """The generator stage ``stage`` draws ``item`` from for scene ``scene_id`` (:meth:`StageContext.rng`).
+
+    A function of (run seed, scene id, stage, *item) alone: independent of order and workers, and
+    askable from another stage (the crowd asks for the body the motion and binding stages will draw).
+    """
+    return derive_rng(config.seed, scene_id, stage, *item)
+
+
 @dataclass
 class StageContext:
     """What a stage sees for one scene.
@@ -84,7 +93,7 @@ class StageContext:
 
     def rng(self, *item: object) -> np.random.Generator:
         """Generator seeded by (run seed, scene id, stage, *item): independent of order and workers."""
-        return derive_rng(self.config.seed, self.scene_id, self.stage, *item)
+        return stage_rng(self.config, self.scene_id, self.stage, *item)
 
 
 @dataclass(frozen=True)
