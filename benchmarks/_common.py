@@ -10,6 +10,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -76,3 +78,42 @@ def bench_env(env: Path, probe: str, packages: list[str]) -> Path:
     subprocess.run([sys.executable, "-m", "venv", str(env)], check=True)
     subprocess.run([str(python), "-m", "pip", "install", "--quiet", *packages], check=True)
     return python
+
+
+def give_up_dither(xy, ids, status: dict, intents, mesh, fps: int) -> list[tuple[float, float]]:
+    """Per walker that gave its routine up: (seconds it got no nearer its goal before giving up, metres walked then).
+
+    ``xy`` (N, F, 2) are the tracks of pedestrians ``ids`` from t = 0, ``status`` their ``crowd_status.json``
+    entries by id (int or str keys), ``intents`` the scene's (their routines' last stops). Nearer: 10 cm less path to
+    the goal on the static navmesh (a straight line would count a detour round a wall as none), than
+    anywhere since it set off on that last leg (``last_leg_s``; from t = 0 in files without it). The
+    dither the crowd issue asks to end within 5 s.
+    """
+    goals = {int(i.id): np.asarray(i.route()[-1].goal_xy, dtype=np.float64) for i in intents}  # the last stop
+    out = []
+    for row, k in enumerate(int(i) for i in ids):
+        info = status.get(k, status.get(str(k)))
+        if info is None or info["status"] != "gave_up":
+            continue
+        end = int(round(info["gave_up_s"] * fps))
+        track = xy[row, max(int(round((info.get("last_leg_s") or 0.0) * fps)), 0) : end + 1]
+        gap = np.array([mesh.find_path(p, goals[k], max_snap=0.5, allow_partial=True).length for p in track])
+        best = np.minimum.accumulate(gap)
+        behind = np.flatnonzero(best > best[-1] + 0.1)  # frames before its last 10 cm of progress
+        start = behind[-1] + 1 if len(behind) else 0
+        out.append(((len(track) - 1 - start) / fps, float(np.hypot(*np.diff(track[start:], axis=0).T).sum())))
+    return out
+
+
+def dither_summary(dither: list[tuple[float, float]]) -> dict:
+    """Median and maximum of :func:`give_up_dither`'s seconds, median metres, and the share within 5 s."""
+    if not dither:
+        return {"give_up_walkers": 0}
+    stuck, walked = np.array([s for s, _ in dither]), np.array([m for _, m in dither])
+    return {
+        "give_up_walkers": len(dither),
+        "give_up_no_progress_s_median": round(float(np.median(stuck)), 1),
+        "give_up_no_progress_s_max": round(float(stuck.max()), 1),
+        "give_up_within_5s_share": round(float(np.mean(stuck <= 5.0)), 4),
+        "give_up_walked_m_median": round(float(np.median(walked)), 1),
+    }

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import emit  # noqa: E402
+from _common import dither_summary, emit, give_up_dither  # noqa: E402
 
 from song.config import SongConfig, parse_assignments  # noqa: E402
 from song.datasets.run.intents import Intent, Provenance  # noqa: E402
@@ -79,29 +79,6 @@ def synthetic_intents(mesh: Navmesh, count: int, seed: int) -> list[Intent]:
     return intents
 
 
-def give_up_dither(plan, intents, mesh) -> dict:
-    """For the walkers that gave up: how long they got no nearer their goal before giving up, and how
-    far they walked meanwhile (the dither the crowd issue asks to end within 5 s). Nearer: 10 cm less
-    path to the goal on the static mesh (a straight line would count a detour round a wall as none)."""
-    ids, stuck_s, walked = list(plan.ped_ids), [], []
-    for k, info in plan.status.items():
-        if info["status"] != "gave_up":
-            continue
-        xy = plan.xy[ids.index(k)]
-        end = int(info["gave_up_s"] * plan.fps)
-        goal = np.asarray(intents[k].goal_xy, dtype=np.float64)
-        gap = np.array([mesh.find_path(p, goal, max_snap=0.5, allow_partial=True).length for p in xy[: end + 1]])
-        best = np.minimum.accumulate(gap)
-        behind = np.flatnonzero(best > best[-1] + 0.1)  # frames before its last 10 cm of progress
-        start = behind[-1] + 1 if len(behind) else 0
-        stuck_s.append((end - start) / plan.fps)
-        walked.append(float(np.hypot(*np.diff(xy[start : end + 1], axis=0).T).sum()))
-    if not stuck_s:
-        return {}
-    return {"give_up_no_progress_s_median": round(float(np.median(stuck_s)), 1), "give_up_no_progress_s_max":
-            round(max(stuck_s), 1), "give_up_walked_m_median": round(float(np.median(walked)), 1)}  # fmt: skip
-
-
 def timed(intents, mesh, config) -> tuple[float, float, dict]:
     """Wall and CPU seconds of one crowd plan, and its outcome counts (and the give-up dither)."""
     cfg = config.crowd
@@ -110,7 +87,15 @@ def timed(intents, mesh, config) -> tuple[float, float, dict]:
     seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
     counts = {kind: sum(v["status"] == kind for v in plan.status.values()) for kind in OUTCOMES}
     simulated = round((plan.xy.shape[1] - 1) / plan.fps, 1)
-    return seconds, cpu, {"simulated_s": simulated, **counts, **give_up_dither(plan, intents, mesh)}
+    return (
+        seconds,
+        cpu,
+        {
+            "simulated_s": simulated,
+            **counts,
+            **dither_summary(give_up_dither(plan.xy, plan.ped_ids, plan.status, intents, mesh, plan.fps)),
+        },
+    )
 
 
 def main() -> None:

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import ROOT, crowd_outcomes, emit  # noqa: E402
+from _common import ROOT, crowd_outcomes, dither_summary, emit, give_up_dither  # noqa: E402
 
 from song.config import SongConfig, parse_assignments  # noqa: E402
 from song.datasets.run import read_crowd, read_intents  # noqa: E402
@@ -57,6 +57,7 @@ from song.pipeline.crowd.realism import (  # noqa: E402
     read_edinburgh_tracks,
     read_obsmat,
     stop_facing,
+    tortuosity,
     wall_clearances,
 )
 
@@ -152,6 +153,28 @@ def _figure(figure, run: dict):
         return None
 
 
+def route_tracks(intents, mesh, fps: int) -> list[Track]:
+    """Each intent's legs walked alone along the navmesh's shortest path at its own constant speed, one track per leg.
+
+    What the crowd would walk with nobody else there and corners taken on the spot: the floor of the
+    tortuosity its routes allow (a crowd rounds corners, so it can come a little under it).
+    """
+    out = []
+    for i in intents:
+        here = np.asarray(i.start_xy, dtype=np.float64)
+        for leg in i.route():
+            res = mesh.find_path(here, np.asarray(leg.goal_xy, dtype=np.float64), max_snap=0.5, allow_partial=True)
+            points = res.points if len(res.points) else here[None]
+            here = points[-1]
+            along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+            if along[-1] < 1e-6:
+                continue
+            t = np.arange(0.0, along[-1] / i.speed, 1.0 / fps)
+            xy = np.column_stack([np.interp(t * i.speed, along, points[:, k]) for k in range(2)])
+            out.append(Track(t, xy))
+    return out
+
+
 def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int = 1, sets: dict | None = None) -> dict:
     sets = sets or {}
     config = SongConfig(
@@ -168,6 +191,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
     reversals, walking_minutes = 0, 0.0
     walkable: list[float] = []
     sizes: list[int] = []  # walking groups' sizes (1: alone), from the intents
+    routes: list[np.ndarray] = []  # tortuosity of the shortest routes walked alone (the floor)
+    dither: list[tuple[float, float]] = []  # walkers who gave up: no progress before it, s; walked then, m
     r = config.crowd.agent_radius_m
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
@@ -187,6 +212,10 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
         reversals, walking_minutes = reversals + count, walking_minutes + minutes
         mesh = load_navmesh(scene)
         field = WallDistance(mesh)
+        routes.append(tortuosity(route_tracks(read_intents(scene / "intents.json").intents, mesh, crowd.fps)))
+        dither += give_up_dither(
+            crowd.xy, crowd.ids, status, read_intents(scene / "intents.json").intents, mesh, crowd.fps
+        )
         walls.append(wall_clearances(scene_tracks, lambda xy, f=field: f.at(xy) - r))
         walkable.append(density(scene_tracks, mesh.area))
         shares.append(_walking_share(scene_tracks))
@@ -218,6 +247,8 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
             "stops_facing_away_over_45deg": round(float(np.mean(np.asarray(facing) > 45.0)), 4) if facing else None,
             "stops_facing_error_median_deg": round(float(np.median(facing)), 2) if facing else None,
             "crowd_s_median_per_scene": round(float(np.median(seconds)), 3) if seconds else None,
+            **dither_summary(dither),
+            **_route_tortuosity(np.concatenate(routes) if routes else np.zeros(0)),
             "in_groups_share": round(sum(n for n in sizes if n > 1) / max(sum(sizes), 1), 4),
             "group_sizes": {str(n): sizes.count(n) for n in sorted(set(sizes))},
             "scenes": len(results),
@@ -225,6 +256,15 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
         }
     )
     return stats
+
+
+def _route_tortuosity(samples: np.ndarray) -> dict:
+    if not len(samples):
+        return {}
+    return {
+        "route_tortuosity_median": round(float(np.median(samples)), 4),
+        "route_tortuosity_p95": round(float(np.percentile(samples, 95)), 4),
+    }
 
 
 def _density_cell(stats: dict) -> str:

@@ -120,6 +120,11 @@ class CrowdConfig(_Section):
     stall_time_s: float = Field(2.0, gt=0.0, description="no progress for this long = stalled, s")
     start_jitter_m: float = Field(0.03, ge=0.0, le=0.2, description="start jitter breaking symmetry, m")
     contour_error_m: float = Field(0.05, ge=0.0, description="contour simplification tolerance, m")
+    give_up_in_hindsight: bool = Field(
+        True,
+        description="a walker that gives a stop up does so at its first stall on the way there, not after "
+        "its tries (the plan is simulated again with that decision; docs/crowd.md)",
+    )
     queue_at_passages: bool = Field(
         False,
         description="wait clear of a passage too narrow to pass in while it is used the other way (docs/crowd.md)",

@@ -132,7 +132,8 @@ class PedestrianStatus(BaseModel):
 
     ``arrived``: at the last stop of its routine (``arrival_s``: when it got there, even if it later
     stepped aside to make room for a walker); ``gave_up``: stalled for good on its last leg, it
-    stepped out of the way and stands there (its track is kept; ``gave_up_s``: when it gave up);
+    stepped out of the way and stands there (its track is kept; ``gave_up_s``: when it gave up, ``last_leg_s``:
+    when it set off on that leg);
     ``timeout``: still under way when the simulation ended; ``removed``: it could not start (no
     track; ``reason`` says why).
     """
@@ -142,6 +143,9 @@ class PedestrianStatus(BaseModel):
     reason: str = ""
     arrival_s: float | None = None
     gave_up_s: float | None = Field(default=None, description="when it gave its routine up (``gave_up`` only)")
+    last_leg_s: float | None = Field(
+        default=None, description="when it set off on the leg it gave up (``gave_up`` only; None in older files)"
+    )
     skipped_stops: list[int] = Field(
         default_factory=list,
         description="routine stops (indices into Intent.route()) given up because the way stayed blocked",

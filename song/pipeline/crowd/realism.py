@@ -142,6 +142,27 @@ def _summary(values: np.ndarray) -> dict[str, float | int | None]:
     }
 
 
+def _window_tortuosity(track: Track, moving: np.ndarray) -> list[float]:
+    """Path length over displacement in the track's successive ``WINDOW_S`` windows of walking (displacement ≥ 1 m)."""
+    out = []
+    span = int(round(WINDOW_S * RATE_HZ))
+    for start in range(0, len(track.t) - span, span):
+        seg = track.xy[start : start + span + 1]
+        if moving[start : start + span + 1].all():
+            disp = float(np.hypot(*(seg[-1] - seg[0])))
+            if disp >= 1.0:
+                out.append(float(np.hypot(*np.diff(seg, axis=0).T).sum()) / disp)
+    return out
+
+
+def tortuosity(tracks: list[Track]) -> np.ndarray:
+    """The tortuosity samples of :func:`crowd_statistics` (resampled to 2.5 Hz, walking windows only)."""
+    out: list[float] = []
+    for track in resample(tracks):
+        out += _window_tortuosity(track, np.hypot(*_velocity(track).T) > MOVING_MPS)
+    return np.asarray(out)
+
+
 def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float | None = None) -> dict:
     """Every statistic of the module docstring, resampled here to 2.5 Hz.
 
@@ -154,7 +175,7 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         groups = [groups]
     groups = [resample(group) for group in groups]
     tracks = [track for group in groups for track in group]
-    speeds, standing, active_standing, active_total, tortuosity, accel, steady = [], 0, 0, 0, [], [], []
+    speeds, standing, active_standing, active_total, windows, accel, steady = [], 0, 0, 0, [], [], []
     along, across = [], []  # steady acceleration along the velocity (speed changes) and across it (turning)
     total = 0
     for track in tracks:
@@ -178,13 +199,7 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
             unit = v[keep] / s[keep, None]
             along.append((a[keep] * unit).sum(axis=1))
             across.append(a[keep, 1] * unit[:, 0] - a[keep, 0] * unit[:, 1])
-        span = int(round(WINDOW_S * RATE_HZ))
-        for start in range(0, len(track.t) - span, span):
-            seg = track.xy[start : start + span + 1]
-            if moving[start : start + span + 1].all():
-                disp = float(np.hypot(*(seg[-1] - seg[0])))
-                if disp >= 1.0:
-                    tortuosity.append(float(np.hypot(*np.diff(seg, axis=0).T).sum()) / disp)
+        windows += _window_tortuosity(track, moving)
     speed = np.concatenate(speeds) if speeds else np.zeros(0)
     per_group = [pass_distances(group) for group in groups]
     passes = {
@@ -198,8 +213,8 @@ def crowd_statistics(groups: list[list[Track]] | list[Track], walkable_m2: float
         "speed_p95_mps": round(float(np.percentile(speed, 95)), 3) if len(speed) else None,
         "standing_share": round(standing / max(total, 1), 4),
         "standing_share_active": round(active_standing / max(active_total, 1), 4),
-        "tortuosity_median": round(float(np.median(tortuosity)), 4) if tortuosity else None,
-        "tortuosity_p95": round(float(np.percentile(tortuosity, 95)), 4) if tortuosity else None,
+        "tortuosity_median": round(float(np.median(windows)), 4) if windows else None,
+        "tortuosity_p95": round(float(np.percentile(windows, 95)), 4) if windows else None,
         "acceleration_rms_mps2": _rms(accel),
         "acceleration_rms_steady_mps2": _rms(steady),
         "acceleration_rms_steady_along_mps2": _rms(along),

@@ -24,6 +24,14 @@ Per pedestrian, per frame (DetourCrowd's ``dtCrowd::update`` order):
    stands there (status ``gave_up``). (Stepping aside instead of standing still where it stalled: 3
    against 3 through a 1.0 m door all arrive, 5 of 6 before; in the generated lobby 30-32 of 32 arrive,
    26 before.)
+6. hindsight (``crowd.give_up_in_hindsight``): the plan is made offline, so a walker that gives a stop
+   up can know it will. Where one gave up more than ``stall_time_s`` after it last got nearer that stop
+   (its tries: replan, step-asides, each with some progress along a new path but none toward the stop),
+   the crowd is simulated again with a decision: ``stall_time_s`` after that last progress (its first
+   stall) it gives the stop up at once, stepping aside, or walking on to its next. Up to the first
+   decision the new run is the old one frame for frame; after it others may fare differently, so a
+   decision holds only for a walker still where it stood when it was made (:func:`_decide`), and this
+   repeats while new late give-ups appear, at most ``HINDSIGHT_PASSES`` times.
 
 Nobody is removed once the simulation runs, so it runs once, from the earliest departure to the end
 (a walker stalled for good gives up and stays in the scene; docs/crowd.md). Only pedestrians that cannot
@@ -86,6 +94,10 @@ SEPARATION_REACH_M = 0.15  # beyond 2r + this (two frames' steps at 1.8 m/s, and
 # 2r (a wall on the other side) is legal but leaves avoidance no room, and the walker stalls in it again
 REPLAN_CLEARANCE_M = 0.1
 MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
+# hindsight: a stop given up more than stall_time_s + HINDSIGHT_SLACK_S after the walker last got nearer it is
+# decided at its first stall instead, in a new run (at most HINDSIGHT_PASSES); progress sampled this often
+HINDSIGHT_PASSES, HINDSIGHT_SLACK_S, HINDSIGHT_EVERY = 6, 0.5, 3
+HINDSIGHT_NEAR_M = 0.5  # a decision made in an earlier run holds for a walker this near where it stood then
 SLOT_M = 1.2  # a group member walks this far beside (or behind) its leader: beyond the comfort distance ORCA keeps
 FORMATION_S = 1.0  # a member closes the gap to its slot in about this long
 CATCH_UP = 1.4  # a member may walk this much faster than the group to keep up
@@ -148,6 +160,12 @@ class _Walkers:
     member: np.ndarray  # (N,) its place in its group (0: the leader, or alone)
     abreast: np.ndarray  # (N,) bool: its slot beside the leader is free (checked every CHECK_EVERY frames)
     radius: np.ndarray  # (N,) body radius, m (at most the navmesh's agent radius)
+    leg_began: np.ndarray  # (N,) s: when it set off for the routine stop it is walking to
+    # per pedestrian: the routine stops it gave up, as (index in Intent.route(), where, set off for it, gave it up)
+    given_up: list[list[tuple[int, np.ndarray, float, float]]] = field(default_factory=list)
+    # hindsight (:func:`plan_crowd`): (pedestrian, routine stop) -> (when it gives that stop up, s; where it is then)
+    decide: dict[tuple[int, int], tuple[float, np.ndarray]] = field(default_factory=dict)
+    decided: set[int] = field(default_factory=set)  # pedestrians that gave their routine up by such a decision
 
 
 def _to_segments(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -277,6 +295,8 @@ def _start(
         member=np.array([(leader[:k] == leader[k]).sum() + 1 if leader[k] >= 0 else 0 for k in range(n)], np.int64),
         abreast=np.ones(n, bool),
         radius=radius,
+        leg_began=depart.copy(),
+        given_up=[[] for _ in range(n)],
     )
     _refresh(w, range(n))
     w.best = _remaining(w, np.arange(n))
@@ -365,7 +385,40 @@ def _next_leg(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
     w.waited[k] = 0.0
     if not stops[leg][2]:  # a step aside is part of the leg it interrupts
         w.replanned[k], w.yields[k] = "", 0
+        w.leg_began[k] = w.dwell_until[k]
     return True
+
+
+def _routine_stop(w: _Walkers, k: int) -> int:
+    """The index in its routine (``Intent.route()``) of the stop walker k is on its way to (steps aside not counted)."""
+    return sum(not aside for _, _, aside, _ in w.stops[k][: int(w.leg[k])])
+
+
+def _decide(w: _Walkers, mesh: Navmesh, moving: np.ndarray, t: float, radius: float) -> None:
+    """Hindsight (:func:`plan_crowd`): walkers whose decision time has come give their stop up now.
+
+    A decision holds where it was made: walker k still on its way to that stop, on the try that began
+    before the decision, and within ``HINDSIGHT_NEAR_M`` of where it stood then (after an earlier decision
+    changed the crowd, it may fare better this time). A step aside under way ends; then :func:`_skip_stop`,
+    or on the last leg :func:`_give_up`.
+    """
+    for (k, stop), (when, where) in list(w.decide.items()):
+        if when > t:
+            continue
+        del w.decide[(k, stop)]
+        if w.arrived[k] or _routine_stop(w, k) != stop or w.leg_began[k] > when:
+            continue
+        if _length(w.pos[k] - where) > HINDSIGHT_NEAR_M:
+            continue
+        leg = int(w.leg[k])
+        if w.stops[k][leg][2]:  # on its way to a spot aside: that step aside is over
+            del w.stops[k][leg]
+            w.goal[k] = w.stops[k][leg][0]
+        w.yield_until[k] = min(w.yield_until[k], t)
+        w.dwell_until[k] = min(w.dwell_until[k], t)  # waiting at a spot aside
+        if not _skip_stop(w, mesh, k, t):
+            w.decided.add(k)
+            _give_up(w, mesh, k, moving, radius, t)
 
 
 def _skip_stop(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
@@ -377,9 +430,11 @@ def _skip_stop(w: _Walkers, mesh: Navmesh, k: int, t: float) -> bool:
     leg = int(w.leg[k])
     if leg + 1 >= len(w.stops[k]):
         return False
-    w.skipped[k].append(sum(not aside for _, _, aside, _ in w.stops[k][:leg]))
+    stop = _routine_stop(w, k)
+    w.skipped[k].append(stop)
+    w.given_up[k].append((stop, w.stops[k][leg][0].copy(), float(w.leg_began[k]), t))
     _next_leg(w, mesh, k, t)
-    w.dwell_until[k] = w.last_progress[k] = t
+    w.dwell_until[k] = w.last_progress[k] = w.leg_began[k] = t
     return True
 
 
@@ -391,6 +446,7 @@ def _give_up(w: _Walkers, mesh: Navmesh, k: int, moving: np.ndarray, radius: flo
     """
     w.gave_up[k] = t
     leg = int(w.leg[k])
+    w.given_up[k].append((_routine_stop(w, k), w.stops[k][leg][0].copy(), float(w.leg_began[k]), t))
     if _step_aside(w, mesh, k, moving, radius, t):
         del w.stops[k][leg + 1 :]  # the stop it gave up
     else:
@@ -657,6 +713,8 @@ def _simulate(w: _Walkers, mesh: Navmesh, avoid: LocalAvoidance, cfg: CrowdConfi
             _queue(w, queues, moving, t)
         _step_frame(w, mesh, avoid, moving, cfg, frame, queues)
         _check_progress(w, mesh, moving, t, cfg)
+        if w.decide:
+            _decide(w, mesh, moving, t, cfg.agent_radius_m)
         record_frame(w.pos, w.vel, w.smooth, w.heading, w.face, turn, xy, yaw, speed, frame)
     return xy[:, : frame + 1], yaw[:, : frame + 1], speed[:, : frame + 1]
 
@@ -718,11 +776,52 @@ def plan_crowd(
             np.zeros(0, np.int64), np.zeros((0, 1, 2)), np.zeros((0, 1)), np.zeros((0, 1)), cfg.fps, status
         )
     xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
+    decide: dict[tuple[int, int], tuple[float, np.ndarray]] = {}
+    for _ in range(
+        HINDSIGHT_PASSES if cfg.give_up_in_hindsight else 0
+    ):  # a walker that gives a stop up does so when its futile try begins
+        late = {
+            key: at
+            for key, at in _late_decisions(w, xy, mesh, cfg).items()
+            if key not in decide or decide[key][0] != at[0]
+        }
+        if not late:
+            break
+        decide |= late
+        w, _ = _start([intents[k] for k in kept], mesh, jitter[kept], outlines or {}, radius[kept])
+        w.decide = dict(decide)
+        xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
     for row, k in enumerate(kept):
         status[intents[k].id] = {**_outcome(w, row, cfg, shift), "body_radius_m": round(float(radius[k]), 6)}
     ids = np.array([intents[k].id for k in kept], dtype=np.int64)
     span = slice(min(lead, xy.shape[1] - 1), None)  # the scenario: from t = 0 on
     return CrowdPlan(ids, xy[:, span].copy(), yaw[:, span].copy(), speed[:, span].copy(), cfg.fps, status)
+
+
+def _late_decisions(w: _Walkers, xy: np.ndarray, mesh: Navmesh, cfg: CrowdConfig) -> dict:
+    """Stops given up long after the walker last got nearer: (pedestrian, routine stop) -> (when instead, s; where).
+
+    ``where``: where it stood at that time in this run.
+
+    Nearer: ``PROGRESS_M`` less path to the stop on the navmesh (a straight line would count a detour round
+    a wall as no progress), from where it stood every ``HINDSIGHT_EVERY`` frames since it set off for the
+    stop. The decision falls ``cfg.stall_time_s`` after that last progress: its first stall on the way.
+    """
+    late = {}
+    for k, events in enumerate(w.given_up):
+        for stop, where, began, when in events:
+            frames = np.arange(int(np.ceil(began * cfg.fps)), int(when * cfg.fps) + 1, HINDSIGHT_EVERY)
+            if len(frames) < 2:
+                continue
+            gap = np.array([mesh.find_path(xy[k, f], where, max_snap=MAX_SNAP_M, allow_partial=True).length
+                            for f in frames])  # fmt: skip
+            best = np.minimum.accumulate(gap)
+            behind = np.flatnonzero(best > best[-1] + PROGRESS_M)  # before its last progress
+            since = frames[behind[-1] + 1 if len(behind) else 0] / cfg.fps
+            if when > since + cfg.stall_time_s + HINDSIGHT_SLACK_S:
+                when = since + cfg.stall_time_s
+                late[(k, stop)] = (when, xy[k, min(int(np.ceil(when * cfg.fps - 1e-9)), xy.shape[1] - 1)].copy())
+    return late
 
 
 def _body_radius(radii: dict[int, float] | None, ped_id: int, cfg: CrowdConfig) -> float:
@@ -738,12 +837,15 @@ def _body_radius(radii: dict[int, float] | None, ped_id: int, cfg: CrowdConfig) 
 def _outcome(w: _Walkers, k: int, cfg: CrowdConfig, shift: float) -> dict:
     """Pedestrian k's entry of the crowd status (times on the scenario's clock, ``shift`` s after the simulation's)."""
     if not np.isnan(w.gave_up[k]):
-        reason = (
-            f"stalled for {cfg.stall_time_s:g} s after replanning ({w.replanned[k]}) at "
-            f"{w.gave_up[k] - shift:.1f} s; it stepped out of the way and stands there"
-        )
+        when = f"{w.gave_up[k] - shift:.1f} s"
+        if k in w.decided:
+            why = f"its way stayed blocked (decided in hindsight at its first stall, {when})"
+        else:
+            why = f"stalled for {cfg.stall_time_s:g} s after replanning ({w.replanned[k]}) at {when}"
+        reason = f"{why}; it stepped out of the way and stands there"
         return {"status": "gave_up", "reason": reason, "arrival_s": None, "skipped_stops": w.skipped[k],
-                "gave_up_s": round(float(w.gave_up[k]) - shift, 4)}  # fmt: skip
+                "gave_up_s": round(float(w.gave_up[k]) - shift, 4),
+                "last_leg_s": round(float(w.given_up[k][-1][2]) - shift, 4)}  # fmt: skip
     if not np.isnan(w.arrival[k]):  # it finished its routine (it may be stepping aside for someone now)
         return {"status": "arrived", "reason": "", "arrival_s": round(float(w.arrival[k]) - shift, 4),
                 "skipped_stops": w.skipped[k]}  # fmt: skip
