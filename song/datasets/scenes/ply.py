@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from song.datasets.limits import limits, over
+from song.datasets.scenes._ply_kernel import pack_vertices
 from song.errors import FormatError
 from song.util import write_bytes_atomic
 
@@ -332,6 +333,19 @@ def _unpack_rotation(word: np.ndarray) -> np.ndarray:
     return out
 
 
+def pack_vertices_reference(
+    means, pos_lo, pos_hi, log_scales, scale_lo, scale_hi, colours, colour_lo, colour_hi, opacity, quats, chunk, *_
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The plain numpy twin of :func:`song.datasets.scenes._ply_kernel.pack_vertices` (same arguments, same words)."""
+    index = np.arange(len(means)) // chunk
+    fraction = {k: _fraction(v, lo[index], hi[index]) for k, (v, lo, hi) in
+                {"pos": (means, pos_lo, pos_hi), "scale": (log_scales, scale_lo, scale_hi),
+                 "colour": (colours, colour_lo, colour_hi)}.items()}  # fmt: skip
+    rgba = [_pack_unorm(fraction["colour"][:, k], 8) for k in range(3)] + [_pack_unorm(opacity, 8)]
+    colour = (rgba[0] << 24) | (rgba[1] << 16) | (rgba[2] << 8) | rgba[3]
+    return _pack_111011(fraction["pos"]), _pack_rotation(quats), _pack_111011(fraction["scale"]), colour
+
+
 def _pack_unorm(t: np.ndarray, bits: int) -> np.ndarray:
     top = (1 << bits) - 1
     return np.clip(np.floor(t * top + 0.5), 0, top).astype(np.uint32)
@@ -340,8 +354,8 @@ def _pack_unorm(t: np.ndarray, bits: int) -> np.ndarray:
 _OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])  # the three components stored per largest
 
 
-def _pack_rotation(quats: np.ndarray) -> np.ndarray:
-    q = quats / np.linalg.norm(quats, axis=1, keepdims=True)
+def _pack_rotation(q: np.ndarray) -> np.ndarray:
+    """Smallest-three words of unit quaternions ``q`` (N, 4)."""
     largest = np.argmax(np.abs(q), axis=1)  # first of equal magnitudes, as SuperSplat
     sign = np.where(q[np.arange(len(q)), largest] < 0, -1.0, 1.0)  # q ≡ −q: make the largest positive
     t = _pack_unorm(np.take_along_axis(q, _OTHERS[largest], axis=1) * sign[:, None] * SQRT1_2 + 0.5, 10)
@@ -472,14 +486,13 @@ def write_compressed_ply(
         order = morton_order(cloud.means)
         cloud = GaussianCloud(*(None if a is None else a[order] for a in vars(cloud).values()))
     n_chunks = (n + CHUNK - 1) // CHUNK
-    index = np.arange(n) // CHUNK
     groups = {
         CHUNK_POS: cloud.means.astype(np.float64),
         CHUNK_SCALE: cloud.log_scales.astype(np.float64),
         CHUNK_COLOR: 0.5 + SH_C0 * cloud.sh_dc.astype(np.float64),
     }
     chunk = np.empty(n_chunks, dtype=[(name, "<f4") for name in CHUNK_POS + CHUNK_SCALE + CHUNK_COLOR])
-    fractions = {}
+    ranges = []
     for names, values in groups.items():
         lo, hi = _chunk_ranges(values, n_chunks)
         if names is CHUNK_SCALE:
@@ -487,16 +500,15 @@ def write_compressed_ply(
         for k in range(3):
             chunk[names[k]], chunk[names[k + 3]] = lo[:, k], hi[:, k]
         # quantise against the float32 ranges actually stored, so decoding sees the same bounds
-        lo32 = np.stack([chunk[names[k]] for k in range(3)], axis=1).astype(np.float64)[index]
-        hi32 = np.stack([chunk[names[k + 3]] for k in range(3)], axis=1).astype(np.float64)[index]
-        fractions[names] = _fraction(values, lo32, hi32)
+        ranges.append(
+            (values, *(np.stack([chunk[names[k + j]] for k in range(3)], 1).astype(np.float64) for j in (0, 3)))
+        )
     opacity = 1.0 / (1.0 + np.exp(-cloud.opacity_logits.astype(np.float64)))
-    rgba = [_pack_unorm(fractions[CHUNK_COLOR][:, k], 8) for k in range(3)] + [_pack_unorm(opacity, 8)]
+    quats = cloud.quats.astype(np.float64)
+    quats = quats / np.linalg.norm(quats, axis=1, keepdims=True)
     vertex = np.empty(n, dtype=[(name, "<u4") for name in PACKED])
-    vertex["packed_position"] = _pack_111011(fractions[CHUNK_POS])
-    vertex["packed_rotation"] = _pack_rotation(cloud.quats.astype(np.float64))
-    vertex["packed_scale"] = _pack_111011(fractions[CHUNK_SCALE])
-    vertex["packed_color"] = (rgba[0] << 24) | (rgba[1] << 16) | (rgba[2] << 8) | rgba[3]
+    words = pack_vertices(*ranges[0], *ranges[1], *ranges[2], opacity, quats, CHUNK, MIN_SPAN, SQRT1_2)
+    vertex["packed_position"], vertex["packed_rotation"], vertex["packed_scale"], vertex["packed_color"] = words
     elements = [PlyElement.describe(chunk, "chunk"), PlyElement.describe(vertex, "vertex")]
     if cloud.sh_rest is not None:
         flat = cloud.sh_rest.transpose(0, 2, 1).reshape(n, -1).astype(np.float64)  # channel-major

@@ -9,12 +9,17 @@ import pytest
 from numpy.lib.recfunctions import repack_fields
 from plyfile import PlyData, PlyElement
 
+from song.datasets.scenes._ply_kernel import pack_vertices
 from song.datasets.scenes.ply import (
+    CHUNK,
+    MIN_SPAN,
     SH_C0,
+    SQRT1_2,
     GaussianCloud,
     _part1by2,
     check_gaussian_ply,
     morton_order,
+    pack_vertices_reference,
     read_gaussian_ply,
     write_compressed_ply,
     write_standard_ply,
@@ -126,6 +131,30 @@ def test_compressed_round_trip_within_quantisation(tmp_path: Path) -> None:
     assert np.abs(back.sh_rest - cloud.sh_rest).max() <= 4 / 256 + 1e-6  # 256 bins over [-4, 4], bin centres
     write_compressed_ply(tmp_path / "again.ply", cloud)
     assert (tmp_path / "again.ply").read_bytes() == (tmp_path / "c.ply").read_bytes()
+
+
+def test_compiled_packing_equals_its_numpy_twin() -> None:
+    rng = np.random.default_rng(3)
+    for n in (1, CHUNK - 1, 3 * CHUNK + 17):
+        chunks = (n + CHUNK - 1) // CHUNK
+        groups = []
+        for spread in (5.0, 3.0, 1.0):
+            values = rng.uniform(-spread, spread, (n, 3))
+            lo = np.sort(rng.uniform(-spread, spread, (chunks, 2, 3)), axis=1)
+            lo, hi = lo[:, 0].astype(np.float32).astype(np.float64), lo[:, 1].astype(np.float32).astype(np.float64)
+            hi[0, 0] = lo[0, 0] + MIN_SPAN / 2  # a range too narrow to store
+            values[: min(n, 3), 1] = lo[0, 1]  # on the bounds exactly
+            values[-1, 2] = hi[-1, 2]
+            groups += [values, lo, hi]
+        quats = rng.normal(size=(n, 4))
+        quats[0] = [0.5, -0.5, 0.5, -0.5]  # equal magnitudes: the first is the largest
+        quats[-1] = [0.1, -0.9, 0.3, 0.2]  # a negative largest
+        quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+        opacity = rng.uniform(0, 1, n)
+        opacity[0] = 0.5 / 255  # halfway between two codes
+        args = (*groups, opacity, quats, CHUNK, MIN_SPAN, SQRT1_2)
+        for ours, twin in zip(pack_vertices(*args), pack_vertices_reference(*args), strict=True):
+            np.testing.assert_array_equal(ours, twin)
 
 
 def test_morton_write_is_a_permutation(tmp_path: Path) -> None:
