@@ -19,8 +19,8 @@ import numpy as np
 from song.datasets.avatars.asset import AvatarAsset, load_avatar
 from song.datasets.avatars.cache import MotionCache, write_compact_cache, write_materialized_cache
 from song.datasets.run import BindingRecord, Bindings, SceneFolder, read_intents, write_bindings
-from song.datasets.run.layout import BINDINGS_FILE, CACHE_FILE, MATERIALIZED_FILE
-from song.errors import SongError
+from song.datasets.run.layout import BINDINGS_FILE, CACHE_FILE, MATERIALIZED_FILE, MOTION_META_FILE
+from song.errors import FormatError, SongError
 from song.pipeline.binding.pool import ensure_pool
 from song.pipeline.bodies import identity_picks
 from song.pipeline.chain import StageContext
@@ -36,17 +36,31 @@ def _scene_ped_ids(scene: SceneFolder, motion_ids: list[int]) -> list[int]:
     return sorted(set(intent_ids) | set(motion_ids))
 
 
-def _motions(scene: SceneFolder) -> list[LoadedMotion]:
-    return [load_motion(folder) for folder in scene.motion_dirs()]
+def _motions(scene: SceneFolder) -> list[tuple[int, LoadedMotion]]:
+    """(pedestrian id, motion) per motion folder; the id is the folder's (``traj_<id>``), checked against its meta."""
+    out = []
+    for folder in scene.motion_dirs():
+        ped_id, motion = int(folder.name.split("_", 1)[1]), load_motion(folder)
+        if int(motion.meta.get("ped_id", ped_id)) != ped_id:
+            raise FormatError(
+                folder / MOTION_META_FILE, "ped_id", f"is {motion.meta['ped_id']}, the folder's is {ped_id}"
+            )
+        out.append((ped_id, motion))
+    return out
 
 
-def bind_motion(asset: AvatarAsset, motion: LoadedMotion, fps: float) -> tuple[AvatarAsset, MotionCache]:
-    """Scale ``asset`` to the motion's height and build its motion cache (rest skeleton = the scaled avatar's)."""
+def bind_motion(
+    asset: AvatarAsset, motion: LoadedMotion, fps: float, ped_id: int | None = None
+) -> tuple[AvatarAsset, MotionCache]:
+    """Scale ``asset`` to the motion's height and build its motion cache (rest skeleton = the scaled avatar's).
+
+    ``ped_id``: the pedestrian's id (default: the motion's meta, −1 without one).
+    """
     scale = float(motion.height_m) / asset.height_m
     scaled = asset.scaled(scale)
     alignment = np.diag([scale, scale, scale, 1.0])
     meta: dict[str, Any] = {
-        "ped_id": int(motion.meta.get("ped_id", -1)),
+        "ped_id": int(motion.meta.get("ped_id", -1)) if ped_id is None else int(ped_id),
         "avatar_id": asset.avatar_id,
         "avatar_sha256": asset.meta.get("sha256", ""),
         "height_m": round(float(motion.height_m), 6),
@@ -77,15 +91,13 @@ def run_binding(ctx: StageContext) -> list[str]:
     if out_dir.exists():
         shutil.rmtree(out_dir)  # a rerun replaces the whole folder (no stale caches of removed pedestrians)
     out_dir.mkdir(parents=True)
-    ped_ids = [int(motion.meta.get("ped_id", -1)) for motion in motions]
-    picks = identity_picks(ctx.config, ctx.scene_id, _scene_ped_ids(scene, ped_ids), len(pool))
+    picks = identity_picks(ctx.config, ctx.scene_id, _scene_ped_ids(scene, [k for k, _ in motions]), len(pool))
     assets: dict[int, AvatarAsset] = {}
     entries, written = [], []
-    for motion, ped_id in zip(motions, ped_ids, strict=True):
+    for ped_id, motion in motions:
         pick = picks[ped_id]
         asset = assets.setdefault(pick, load_avatar(pool[pick]))
-        scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)))
-        ped_id = cache.meta["ped_id"]
+        scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)), ped_id)
         cache_file = CACHE_FILE.format(ped_id=ped_id)
         write_compact_cache(scene.path(cache_file), cache.root_pos, cache.local_quats, cache.rest_joints, cache.meta)
         written.append(cache_file)

@@ -16,7 +16,9 @@ from song.datasets.avatars.cache import (
     load_materialized_cache,
     skin_asset,
 )
+from song.datasets.run.layout import MOTION_META_FILE
 from song.datasets.scenes import load_scene_package
+from song.errors import FormatError
 from song.geometry.lbs import lbs
 from song.geometry.skeleton import JOINT_INDEX
 from song.pipeline.binding import run_binding
@@ -62,6 +64,20 @@ def test_contract_identities_and_determinism(make_scene, tmp_path, pool) -> None
     again = _bound(make_scene, tmp_path / "b", pool)
     for name in sorted(p.name for p in (ctx.scene_dir / "binding").iterdir()):
         assert (ctx.scene_dir / "binding" / name).read_bytes() == (again.scene_dir / "binding" / name).read_bytes()
+
+
+def test_the_motion_folder_names_the_pedestrian(make_scene, tmp_path, pool) -> None:
+    ctx = _bound(make_scene, tmp_path, pool)
+    before = (ctx.scene_dir / "binding" / "bindings.json").read_bytes()
+    meta = ctx.scene_dir / "human_amass" / "traj_1" / MOTION_META_FILE
+    data = json.loads(meta.read_text())
+    del data["ped_id"]  # a motion written without its id binds as the folder's pedestrian
+    meta.write_text(json.dumps(data))
+    run_binding(ctx)
+    assert (ctx.scene_dir / "binding" / "bindings.json").read_bytes() == before
+    meta.write_text(json.dumps({**data, "ped_id": 2}))  # one that claims another's id is refused, named
+    with pytest.raises(FormatError, match=r"traj_1/meta.json: ped_id: is 2, the folder's is 1"):
+        run_binding(ctx)
 
 
 def test_identity_sampling_cycles_through_permutations() -> None:
