@@ -95,7 +95,7 @@ SEPARATION_REACH_M = 0.15  # beyond 2r + this (two frames' steps at 1.8 m/s, and
 REPLAN_CLEARANCE_M = 0.1
 MAX_SNAP_M = 0.5  # start and goal may be this far off the mesh (they are snapped onto it)
 # hindsight: a stop given up more than stall_time_s + HINDSIGHT_SLACK_S after the walker last got nearer it is
-# decided at its first stall instead, in a new run (at most HINDSIGHT_PASSES); progress sampled this often
+# given up stall_time_s after that instead, in a new run (at most HINDSIGHT_PASSES); progress sampled this often
 HINDSIGHT_PASSES, HINDSIGHT_SLACK_S, HINDSIGHT_EVERY = 6, 0.5, 3
 HINDSIGHT_NEAR_M = 0.5  # a decision made in an earlier run holds for a walker this near where it stood then
 SLOT_M = 1.2  # a group member walks this far beside (or behind) its leader: beyond the comfort distance ORCA keeps
@@ -777,17 +777,13 @@ def plan_crowd(
         )
     xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
     decide: dict[tuple[int, int], tuple[float, np.ndarray]] = {}
-    for _ in range(
-        HINDSIGHT_PASSES if cfg.give_up_in_hindsight else 0
-    ):  # a walker that gives a stop up does so when its futile try begins
+    for _ in range(HINDSIGHT_PASSES if cfg.give_up_in_hindsight else 0):
         late = {
-            key: at
-            for key, at in _late_decisions(w, xy, mesh, cfg).items()
-            if key not in decide or decide[key][0] != at[0]
+            key: at for key, at in _late_decisions(w, xy, mesh, cfg).items() if decide.get(key, (None,))[0] != at[0]
         }
         if not late:
             break
-        decide |= late
+        decide |= late  # run again: each of them gives its stop up when its futile try began
         w, _ = _start([intents[k] for k in kept], mesh, jitter[kept], outlines or {}, radius[kept])
         w.decide = dict(decide)
         xy, yaw, speed = _simulate(w, mesh, avoid, cfg)
