@@ -16,8 +16,10 @@ between the body and the nearest wall or furniture over moving samples (median, 
 0.15 m; from the scene's navmesh, conservative by up to a grid cell), the density on the walkable
 area (the scene's navmesh; median over scenes) beside the density on the floor people covered (the
 one measure the real recordings allow), the heading reversals per walking minute (zigzags on the 30 FPS
-tracks, ``realism.heading_reversals``) and the crowd stage's median seconds per scene. Prints JSON
-(and a markdown table with ``--markdown``).
+tracks, ``realism.heading_reversals``), the crowd stage's median seconds per scene, for walkers who
+gave up how long they got no nearer their last stop before it (``give_up_*``), and the tortuosity of the
+routes alone (``route_tortuosity_*``: each leg's shortest path walked at the walker's speed, nobody
+else there). Prints JSON (and a markdown table with ``--markdown``).
 
 The crowd is chaotic: a change that helps one seed can hurt the next. ``--seeds 1 2 … 12`` runs every
 configuration once per run seed (``SongConfig.seed``; the scenes stay the same) and adds ``targets``:
@@ -259,6 +261,7 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
 
 
 def _route_tortuosity(samples: np.ndarray) -> dict:
+    """Median and p95 of the routes' own tortuosity (:func:`route_tracks` through ``tortuosity``, every scene)."""
     if not len(samples):
         return {}
     return {
