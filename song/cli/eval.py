@@ -206,6 +206,9 @@ def teleop_command(
         help="camera size (default: the largest of 320x240, 240x180, 160x120 that renders in time here)",
     ),  # fmt: skip
     port: int = typer.Option(0, "--port", min=0, max=65535, help="port on 127.0.0.1 (0: any free port)"),
+    reactive: bool = typer.Option(
+        False, "--reactive-pedestrians", help="pedestrians near the robot avoid it (unofficial; recorded)"
+    ),
 ) -> None:
     """Drive the robot yourself from a browser page: the human upper bound, scored and recorded."""
     from song.runtime.teleop import run_teleop
@@ -215,8 +218,9 @@ def teleop_command(
     def ready(url: str) -> None:
         console.print(f"open [bold]{url}[/bold] in a browser on this machine (W/A/S/D or the arrow keys drive)")
 
-    summary = run_teleop(bench, out, episode or None, split, size, port, ready)
+    summary = run_teleop(bench, out, episode or None, split, size, port, ready, reactive=reactive)
     from song.runtime.metrics import markdown_table
 
-    typer.echo(markdown_table({"human": summary["metrics"]}))
-    console.print(f"results in {out}/human.json, demonstrations in {out}/dataset")
+    name = "human-reactive" if reactive else "human"
+    typer.echo(markdown_table({name: summary["metrics"]}))
+    console.print(f"results in {out}/{name}.json, demonstrations in {out}/dataset")

@@ -7,7 +7,8 @@ velocity plus a pull back onto its recorded position (``RETURN_S``), and keeps o
 ORCA (van den Berg et al. 2011) with the robot as an agent that does not yield: one half-plane from the
 robot's position and velocity, the pedestrian taking all of the avoidance, solved with its speed
 limit as in RVO2's one-constraint linear program. Its step must keep its body off walls and off other
-pedestrians; when it would not, it takes its recorded step from where it is, or stands for that step.
+pedestrians; when it would not, it takes its recorded step from where it is, or stands for that step
+(one still on its recording always may take its recorded step: that is the replay).
 
 The displacement from the recording is written into the episode's own copy of the tracks (from the
 current sample on), so every consumer (collisions, sensors, rendering, metrics) sees the same displaced
@@ -151,8 +152,11 @@ class ReactiveCrowd:
                 wanted = self.velocity[k] + change * (MAX_ACCEL * dt / size)
             others = np.delete(after, k, axis=0)
             candidate = here[k]  # where it stands, when neither step is free
+            on_recording = float(np.hypot(*self.offset[k])) <= SETTLED_M
             for step in (wanted, vel1):
-                if self._free(here[k] + step * dt, others):
+                # on its recording, the recorded step is the replay's: taken even where the recording
+                # itself comes closer to a wall or someone than a body (a release's tracks are as they are)
+                if self._free(here[k] + step * dt, others) or (step is vel1 and on_recording):
                     candidate = here[k] + step * dt
                     break
             self.velocity[k] = (candidate - here[k]) / dt

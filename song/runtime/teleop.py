@@ -236,6 +236,7 @@ def run_teleop(
     on_ready: Callable[[str], None] | None = None,
     connect_timeout_s: float = 600.0,
     params: Any = None,
+    reactive: bool = False,
 ) -> dict[str, Any]:
     """Serve the page, wait for it, run each episode once with the person driving; score and record them.
 
@@ -249,6 +250,8 @@ def run_teleop(
         on_ready: called with the page's URL once it is served.
         connect_timeout_s: how long to wait for the page to be opened.
         params: runtime parameters instead of the release's (recorded as overrides: unofficial).
+        reactive: pedestrians near the robot avoid it (:mod:`song.runtime.reactive`; results filed as
+            ``human-reactive.*``, unofficial, and the mode recorded in the dataset).
 
     Returns:
         The results summary (as ``song eval`` writes it).
@@ -291,7 +294,9 @@ def run_teleop(
         for index, episode in enumerate(episodes):
             link.publish(episode=episode.episode_id, index=index, total=len(episodes), outcome=None)
             human = HumanPolicy(link, status)
-            record, result = record_rollout(bench, episode, human, ("state", "rgb"), camera, step_timeout_s=None)
+            record, result = record_rollout(
+                bench, episode, human, ("state", "rgb"), camera, step_timeout_s=None, reactive=reactive
+            )
             records.append(record)
             results.append(result)
             link.publish(outcome=result.outcome, status=f"{status} · episode {index + 1} of {len(episodes)} done")
@@ -302,13 +307,14 @@ def run_teleop(
         server.close()
     sensors = ("state", "rgb")
     setup = EvalSetup("human", sensors, params, overrides, {"camera": camera}, float("inf"), False, False,
-                      {"policy_kind": "human_teleop", "camera": f"{width}x{height}"})  # fmt: skip
+                      {"policy_kind": "human_teleop", "camera": f"{width}x{height}"}, reactive)  # fmt: skip
     summary = write_results(out, setup, results, bench)
     dataset.mkdir(parents=True, exist_ok=True)
     with folder_lock(dataset / LOCK_FILE, "dataset folder"):
         refuse_non_empty(dataset, "teleop")  # again under the lock
         about = {"release": str(bench.version), "fingerprint": bench.info.fingerprint, "policy": "human",
                  "split": split, "keep": "all", "rollouts": len(records),
-                 "successes": sum(r["outcome"] == "success" for r in records), "release_check": "ok", "ablation": None}  # fmt: skip
+                 "successes": sum(r["outcome"] == "success" for r in records), "release_check": "ok", "ablation": None,
+                 "pedestrians": "reactive" if reactive else "replay"}  # fmt: skip
         write_dataset(dataset, records, float(params.robot.control_hz), split, about)
     return summary

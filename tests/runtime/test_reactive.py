@@ -153,3 +153,21 @@ def test_collect_records_reactive_pedestrians(tmp_path: Path) -> None:
     assert info["song"]["pedestrians"] == "reactive"
     plain = collect(str(GOLDEN), "straight", tmp_path / "plain", split="test", limit=1, keep="all")
     assert json.loads((Path(plain.out) / "meta" / "info.json").read_text())["song"]["pedestrians"] == "replay"
+
+
+def test_a_recording_closer_to_a_wall_than_a_body_is_still_walked() -> None:
+    # the golden release's pedestrian 0 walks 0.2 m from a wall (its body is 0.25 m) away from the robot's
+    # start: its own recorded step is the replay's, taken even though no step there is free
+    from song.datasets.bench import open_benchmark
+
+    recorded = open_benchmark(GOLDEN).episode("scene_1-001")
+    ep, collider, crowd = reactive_setup(recorded, True)
+    ped = recorded.pedestrians[0]
+    assert crowd.world.collides(pedestrian_states([ped], 0.6)[1][0], crowd.body)[()]  # the recording itself
+    robot, t = np.array(recorded.start_xy, float), recorded.t0
+    for _ in range(5):  # the robot follows it at 0.5 m/s
+        robot = robot + np.array([0.05, 0.0])
+        crowd.advance(t, t + 0.1, robot, np.array([0.5, 0.0]))
+        t += 0.1
+        np.testing.assert_allclose(pedestrian_states(ep.pedestrians[:1], t)[1], pedestrian_states([ped], t)[1])
+        assert collider.count(t, robot) == 0  # it is not held back into the robot's way

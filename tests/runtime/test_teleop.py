@@ -42,7 +42,8 @@ def _browser():
     return webdriver.Chrome(options=options, service=webdriver.ChromeService(executable_path=DRIVER))
 
 
-def test_a_person_drives_an_episode_from_the_page(tmp_path: Path) -> None:
+@pytest.mark.parametrize("reactive", [False, True], ids=["replay", "reactive"])
+def test_a_person_drives_an_episode_from_the_page(tmp_path: Path, reactive: bool) -> None:
     from selenium.webdriver.common.action_chains import ActionChains
 
     from song.runtime.teleop import run_teleop
@@ -59,7 +60,7 @@ def test_a_person_drives_an_episode_from_the_page(tmp_path: Path) -> None:
         try:
             result["summary"] = run_teleop(
                 str(GOLDEN), out, ["scene_1-001"], resolution=(320, 240), on_ready=lambda u: ready.setdefault("url", u),
-                connect_timeout_s=60, params=params,
+                connect_timeout_s=60, params=params, reactive=reactive,
             )  # fmt: skip
         except BaseException as exc:  # surfaced by the assertions below
             result["error"] = exc
@@ -105,14 +106,18 @@ def test_a_person_drives_an_episode_from_the_page(tmp_path: Path) -> None:
     measured = f"first frame {first_frame_s:.2f} s, key-to-motion {1000 * latency_s:.0f} ms, {steps_per_s:.1f} steps/s"
     sys.stdout.write(f"teleop: {measured}\n")  # shown with -s; the note quotes it
     assert first_frame_s < 5.0 and latency_s < 0.5 and steps_per_s > 5.0  # generous bounds for a loaded CI machine
-    summary = json.loads((out / "human.json").read_text())
+    name = "human-reactive" if reactive else "human"
+    assert sorted(p.name for p in out.glob("human*")) == [f"{name}.{ext}" for ext in ("json", "md", "parquet")]
+    summary = json.loads((out / f"{name}.json").read_text())
     assert summary["policy"] == "human" and summary["policy_kind"] == "human_teleop"
     assert summary["overrides"] == {"robot.max_steps": [200, 45]} and summary["official"] is False
+    assert summary["pedestrians"] == ("reactive" if reactive else "replay")
     import pyarrow.parquet as pq
 
-    (row,) = pq.read_table(out / "human.parquet").to_pylist()
+    (row,) = pq.read_table(out / f"{name}.parquet").to_pylist()
     trajectory = np.array(row["trajectory"])
     assert row["length"] > 0.3 and abs(trajectory[-1, 2] - trajectory[0, 2]) > 0.1  # drove forward, then turned
     info = json.loads((out / "dataset" / "meta" / "info.json").read_text())
     assert info["total_episodes"] == 1 and info["song"]["policy"] == "human"
+    assert info["song"]["pedestrians"] == ("reactive" if reactive else "replay")
     assert (out / "dataset" / "videos").is_dir()
