@@ -275,6 +275,11 @@ def _density_cell(stats: dict) -> str:
     return f"{stats['density_covered_per_m2']}" + (f" ({walkable})" if walkable is not None else "")
 
 
+def _give_up_cell(stats: dict) -> str:
+    walkers = stats["give_up_walkers"]
+    return f"{walkers} ({stats['give_up_no_progress_s_max']})" if walkers else "0"
+
+
 def markdown(rows: dict[str, dict]) -> str:
     cols = [
         ("head-on p25, m", lambda s: s["passes"]["head_on"]["p25"]),
@@ -284,6 +289,7 @@ def markdown(rows: dict[str, dict]) -> str:
         ("speed median (p95), m/s", lambda s: f"{s['speed_median_mps']} ({s['speed_p95_mps']})"),
         ("standing share", lambda s: s["standing_share"]),
         ("tortuosity median (p95)", lambda s: f"{s['tortuosity_median']} ({s['tortuosity_p95']})"),
+        ("the routes alone: tortuosity p95", lambda s: s["route_tortuosity_p95"]),
         (
             "accel RMS (steady walking: along / across), m/s²",
             lambda s: (
@@ -295,6 +301,7 @@ def markdown(rows: dict[str, dict]) -> str:
         ("moving within 0.15 m of a wall", lambda s: s["wall_gap_below_0.15_share"]),
         ("density, /m² covered (walkable)", _density_cell),
         ("last stop / whole routine reached", lambda s: f"{s['arrived_share']} / {s['routine_complete_share']}"),
+        ("gave up: walkers (s without progress, max)", _give_up_cell),
     ]
     lines = ["| set | " + " | ".join(c for c, _ in cols) + " |", "|---" * (len(cols) + 1) + "|"]
     for name, stats in rows.items():
