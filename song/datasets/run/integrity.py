@@ -133,6 +133,7 @@ def check_scene_unchanged(folder: SceneFolder, package_root: Path) -> None:
     if not completed:
         raise StageError(f"{folder.stages}: no completed stage for scene '{folder.scene_id}'; run `song synth` first")
     present = {name: package_root / name for name in PACKAGE_FILES if (package_root / name).is_file()}
+    digests: dict[str, str] = {}  # each file hashed once, whatever the number of stages that read it
     for stage, entry in completed.items():
         files = entry.get("scene")
         if not isinstance(files, dict):
@@ -140,7 +141,9 @@ def check_scene_unchanged(folder: SceneFolder, package_root: Path) -> None:
                 f"{folder.stages}: stage '{stage}' recorded no scene hashes (an older run); re-run `song synth`"
             )
         for name in sorted(set(files) | set(present)):
-            now = sha256_file(present[name]) if name in present else None
+            if name in present and name not in digests:
+                digests[name] = sha256_file(present[name])
+            now = digests.get(name)
             if now != files.get(name):
                 change = "appeared" if name not in files else "was removed" if now is None else "changed"
                 raise StageError(
