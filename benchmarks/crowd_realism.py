@@ -199,25 +199,22 @@ def run_config(scenes: Path, avoidance: str, profile: str, work: Path, seed: int
     for scene in sorted((run / "scenes").iterdir()):
         crowd = read_crowd(scene)
         status = json.loads((scene / "crowd_status.json").read_text())
+        intents = read_intents(scene / "intents.json").intents
         statuses += status.values()
-        groups = Counter(
-            i.group if i.group is not None else -1 - i.id for i in read_intents(scene / "intents.json").intents
-        )
+        groups = Counter(i.group if i.group is not None else -1 - i.id for i in intents)
         sizes += list(groups.values())
         if len(crowd.ids) == 0:
             continue
         objects = load_scene_package(scenes / scene.name).semantic_map.object_by_id()
-        facing += stop_facing(crowd, read_intents(scene / "intents.json").intents, objects)
+        facing += stop_facing(crowd, intents, objects)
         scene_tracks = [Track(crowd.t, crowd.xy[k]) for k in range(len(crowd.ids))]
         tracks.append(scene_tracks)
         count, minutes = heading_reversals(scene_tracks)
         reversals, walking_minutes = reversals + count, walking_minutes + minutes
         mesh = load_navmesh(scene)
         field = WallDistance(mesh)
-        routes.append(tortuosity(route_tracks(read_intents(scene / "intents.json").intents, mesh, crowd.fps)))
-        dither += give_up_dither(
-            crowd.xy, crowd.ids, status, read_intents(scene / "intents.json").intents, mesh, crowd.fps
-        )
+        routes.append(tortuosity(route_tracks(intents, mesh, crowd.fps)))
+        dither += give_up_dither(crowd.xy, crowd.ids, status, intents, mesh, crowd.fps)
         walls.append(wall_clearances(scene_tracks, lambda xy, f=field: f.at(xy) - r))
         walkable.append(density(scene_tracks, mesh.area))
         shares.append(_walking_share(scene_tracks))

@@ -219,8 +219,9 @@ def teleop_command(
         console.print(f"open [bold]{url}[/bold] in a browser on this machine (W/A/S/D or the arrow keys drive)")
 
     summary = run_teleop(bench, out, episode or None, split, size, port, ready, reactive=reactive)
+    from song.runtime.evaluate import results_stem
     from song.runtime.metrics import markdown_table
 
-    name = "human-reactive" if reactive else "human"
+    name = results_stem("human", reactive=reactive)
     typer.echo(markdown_table({name: summary["metrics"]}))
     console.print(f"results in {out}/{name}.json, demonstrations in {out}/dataset")

@@ -254,11 +254,19 @@ def provenance(bench: Benchmark, setup: EvalSetup) -> dict[str, Any]:
     }
 
 
+def results_stem(policy: str, no_avatars: bool = False, reactive: bool = False) -> str:
+    """The file name (without extension) a policy's results go to: marked for the ablation and for reactive pedestrians."""
+    return (
+        policy.replace(":", "_").replace("/", "_")
+        + ("-no-avatars" if no_avatars else "")
+        + ("-reactive" if reactive else "")
+    )
+
+
 def write_results(out_dir: Path, setup: EvalSetup, results: list[EpisodeResult], bench: Benchmark) -> dict[str, Any]:
     """Write ``<policy>.parquet``, ``<policy>.json`` and ``<policy>.md`` into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    safe = setup.policy.replace(":", "_").replace("/", "_") + ("-no-avatars" if setup.no_avatars else "")
-    safe += "-reactive" if setup.reactive else ""
+    safe = results_stem(setup.policy, setup.no_avatars, setup.reactive)
     about = provenance(bench, setup)
     table = results_table(results, setup.label)
     table = table.replace_schema_metadata({b"song.eval": json.dumps(about, sort_keys=True).encode()})

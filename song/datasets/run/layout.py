@@ -61,6 +61,11 @@ def traj_dir_name(ped_id: int) -> str:
     return Path(TRAJ_DIR.format(ped_id=int(ped_id))).name
 
 
+def traj_ped_id(traj_dir: Path) -> int:
+    """The pedestrian id a ``traj_<id>`` folder is named after (the inverse of :func:`traj_dir_name`)."""
+    return int(Path(traj_dir).name.split("_", 1)[1])
+
+
 @dataclass(frozen=True)
 class SceneFolder:
     """``RUN/scenes/<scene_id>/``: paths of one scene's artifacts."""
@@ -113,7 +118,7 @@ class SceneFolder:
     def motion_dirs(self) -> list[Path]:
         """Every ``human_amass/traj_<id>/`` holding a motion file, by pedestrian id."""
         found = [p for p in self.amass_dir.glob("traj_*") if (p / MOTION_FILE).is_file()]
-        return sorted(found, key=lambda p: int(p.name.split("_", 1)[1]))
+        return sorted(found, key=traj_ped_id)
 
     @property
     def binding_dir(self) -> Path:

@@ -19,7 +19,7 @@ import numpy as np
 from song.datasets.avatars.asset import AvatarAsset, load_avatar
 from song.datasets.avatars.cache import MotionCache, write_compact_cache, write_materialized_cache
 from song.datasets.run import BindingRecord, Bindings, SceneFolder, read_intents, write_bindings
-from song.datasets.run.layout import BINDINGS_FILE, CACHE_FILE, MATERIALIZED_FILE, MOTION_META_FILE
+from song.datasets.run.layout import BINDINGS_FILE, CACHE_FILE, MATERIALIZED_FILE, MOTION_META_FILE, traj_ped_id
 from song.errors import FormatError, SongError
 from song.pipeline.binding.pool import ensure_pool
 from song.pipeline.bodies import identity_picks
@@ -40,7 +40,7 @@ def _motions(scene: SceneFolder) -> list[tuple[int, LoadedMotion]]:
     """(pedestrian id, motion) per motion folder; the id is the folder's (``traj_<id>``), checked against its meta."""
     out = []
     for folder in scene.motion_dirs():
-        ped_id, motion = int(folder.name.split("_", 1)[1]), load_motion(folder)
+        ped_id, motion = traj_ped_id(folder), load_motion(folder)
         if int(motion.meta.get("ped_id", ped_id)) != ped_id:
             raise FormatError(
                 folder / MOTION_META_FILE, "ped_id", f"is {motion.meta['ped_id']}, the folder's is {ped_id}"
