@@ -318,7 +318,7 @@ class Texels:
     def of(cls, pos, normals, bucket, h: float, lo: np.ndarray, dims: np.ndarray, weight=None) -> Texels:
         """Group points (surfels, or finer texels with their ``weight``) into texels of ``h`` m on the grid ``lo``, ``dims``."""
         keys = cell_keys(pos, bucket, h, lo, dims)
-        uniq, index = np.unique(keys, return_inverse=True)
+        uniq, index = group_keys(keys)
         w = np.ones((len(pos), 1)) if weight is None else np.asarray(weight, dtype=np.float64)[:, None]
         count = sum_by(index, w, len(uniq))[:, 0]
         total = sum_by(index, np.hstack([pos, normals]) * w, len(uniq)) / np.maximum(count, 1e-12)[:, None]
@@ -352,25 +352,8 @@ class Texels:
         A [1 2 1]² filter over its in-plane neighbours that exist (same bucket and depth cell).
         """
         cell, bucket = self.cells()
-        axis = bucket // 2
-        a1, a2 = (axis + 1) % 3, (axis + 2) % 3
-        rows = np.arange(len(cell))
-        neighbours, weights = [], []
-        for o1 in (-1, 0, 1):
-            for o2 in (-1, 0, 1):
-                c = cell.copy()
-                c[rows, a1] += o1
-                c[rows, a2] += o2
-                k = self.find(_encode(c, bucket, self.dims))
-                found = k >= 0
-                neighbours.append(np.where(found, k, rows))
-                weights.append(np.where(found, (2 - abs(o1)) * (2 - abs(o2)), 0.0))
-        weights = np.array(weights, dtype=np.float64)
-        weights /= weights.sum(axis=0)
-        out = values
-        for _ in range(passes):
-            out = sum(w[:, None] * out[n] for n, w in zip(neighbours, weights, strict=True))
-        return out
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        return _blur(cell, bucket, self.keys, self.slots, self.dims, values, int(passes))
 
     def mean(self, values: np.ndarray) -> np.ndarray:
         """Per-texel means of per-surfel ``values`` (N, C)."""
@@ -413,6 +396,68 @@ def _encode(cell: np.ndarray, bucket: np.ndarray, dims: np.ndarray) -> np.ndarra
     return ((cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]) * 6 + bucket
 
 
+@nb.njit(cache=True, parallel=True)
+def _blur(cell, bucket, keys, slots, dims, values, passes):  # pragma: no cover - compiled; twin: blur_reference
+    k, channels = values.shape
+    taps = np.empty((k, 9), dtype=np.int64)
+    weights = np.empty((k, 9))
+    for i in nb.prange(k):
+        axis = bucket[i] // 2
+        t = 0
+        total = 0.0
+        for o1 in range(-1, 2):
+            for o2 in range(-1, 2):
+                c0, c1, c2 = cell[i, 0], cell[i, 1], cell[i, 2]
+                if axis == 0:
+                    c1, c2 = c1 + o1, c2 + o2
+                elif axis == 1:
+                    c2, c0 = c2 + o1, c0 + o2
+                else:
+                    c0, c1 = c0 + o1, c1 + o2
+                found = _find(keys, slots, ((c0 * dims[1] + c1) * dims[2] + c2) * 6 + bucket[i])
+                taps[i, t] = found if found >= 0 else i
+                weights[i, t] = (2 - abs(o1)) * (2 - abs(o2)) if found >= 0 else 0.0
+                total += weights[i, t]
+                t += 1
+        for t in range(9):
+            weights[i, t] /= total
+    out = values
+    for _ in range(passes):
+        nxt = np.empty_like(out)
+        for i in nb.prange(k):
+            for ch in range(channels):
+                acc = weights[i, 0] * out[taps[i, 0], ch]
+                for t in range(1, 9):
+                    acc += weights[i, t] * out[taps[i, t], ch]
+                nxt[i, ch] = acc
+        out = nxt
+    return out
+
+
+def blur_reference(texels: Texels, values: np.ndarray, passes: int = 2) -> np.ndarray:
+    """The plain numpy twin of :meth:`Texels.blur` (tests)."""
+    cell, bucket = texels.cells()
+    axis = bucket // 2
+    a1, a2 = (axis + 1) % 3, (axis + 2) % 3
+    rows = np.arange(len(cell))
+    neighbours, weights = [], []
+    for o1 in (-1, 0, 1):
+        for o2 in (-1, 0, 1):
+            c = cell.copy()
+            c[rows, a1] += o1
+            c[rows, a2] += o2
+            k = texels.find(_encode(c, bucket, texels.dims))
+            found = k >= 0
+            neighbours.append(np.where(found, k, rows))
+            weights.append(np.where(found, (2 - abs(o1)) * (2 - abs(o2)), 0.0))
+    weights = np.array(weights, dtype=np.float64)
+    weights /= weights.sum(axis=0)
+    out = values
+    for _ in range(passes):
+        out = sum(w[:, None] * out[n] for n, w in zip(neighbours, weights, strict=True))
+    return out
+
+
 def mean_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
     """Means of ``values`` rows grouped by ``index`` (0..k−1)."""
     values = values.reshape(len(values), -1)
@@ -420,10 +465,64 @@ def mean_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
 
 
 def sum_by(index: np.ndarray, values: np.ndarray, k: int) -> np.ndarray:
-    """(k, C) float sums of ``values`` (M, C) rows grouped by ``index`` (0..k−1)."""
-    return np.column_stack(
-        [np.bincount(index, weights=values[:, c], minlength=k).astype(np.float64) for c in range(values.shape[1])]
-    )
+    """(k, C) float sums of ``values`` (M, C) rows grouped by ``index`` (0..k−1), added in row order.
+
+    One compiled pass over the rows; the sums are those of ``np.bincount(index, weights=values[:, c])``
+    per column, bit for bit (the same additions in the same order).
+    """
+    values = np.ascontiguousarray(values, dtype=np.float64).reshape(len(values), -1)
+    return _sum_rows(np.ascontiguousarray(index, dtype=np.int64), values, int(k))
+
+
+@nb.njit(cache=True)
+def _sum_rows(index, values, k):  # pragma: no cover - compiled; twin: np.bincount per column (tested)
+    out = np.zeros((k, values.shape[1]))
+    for i in range(len(index)):
+        for c in range(values.shape[1]):
+            out[index[i], c] += values[i, c]
+    return out
+
+
+def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(keys, return_inverse=True)``: the sorted distinct keys and each key's row among them.
+
+    Compiled: a hash table numbers the keys in first-seen order, then only the distinct ones are sorted
+    (5× faster than sorting all of a scene's surfel keys, which repeat ~7× each).
+    """
+    return _group_keys(np.ascontiguousarray(keys, dtype=np.int64))
+
+
+@nb.njit(cache=True)
+def _group_keys(keys):  # pragma: no cover - compiled; twin: np.unique(return_inverse=True) (tested)
+    n = len(keys)
+    size = 16
+    while size < 2 * n:
+        size *= 2
+    mask = size - 1
+    slots = np.full(size, -1, dtype=np.int64)
+    first = np.empty(n, dtype=np.int64)
+    seen = np.empty(n, dtype=np.int64)
+    count = 0
+    for i in range(n):
+        h = _slot(keys[i], mask)
+        while True:
+            s = slots[h]
+            if s < 0:
+                slots[h], first[count], seen[i] = count, i, count
+                count += 1
+                break
+            if keys[first[s]] == keys[i]:
+                seen[i] = s
+                break
+            h = (h + 1) & mask
+    distinct = keys[first[:count]]
+    order = np.argsort(distinct)
+    rank = np.empty(count, dtype=np.int64)
+    rank[order] = np.arange(count)
+    index = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        index[i] = rank[seen[i]]
+    return distinct[order], index
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -577,13 +676,54 @@ def emissive_mask(pos: np.ndarray, normals: np.ndarray, table: LightTable) -> tu
     return which >= 0, which
 
 
-@nb.njit(cache=True, parallel=True)
-def _emitters(pos, normals, kind, centre, u, v, n, half):
+EMITTER_CELL_M = 1.0  # the xy grid that lists the rect lights whose slab can hold a surfel in each cell
+
+
+@nb.njit(cache=True)
+def _emitters(pos, normals, kind, centre, u, v, n, half):  # pragma: no cover - compiled; twin: _emitters_reference
+    """The last rect light whose face holds each surfel, or −1; only the lights listed in its grid cell are tested."""
     which = np.full(len(pos), -1, dtype=np.int64)
-    for i in nb.prange(len(pos)):
-        for j in range(len(kind)):
-            if kind[j] != 0:
-                continue
+    if len(pos) == 0 or len(kind) == 0:
+        return which
+    # each rect light's box (its rectangle, 3 cm behind and 5 mm before it) over a grid of xy cells
+    x0, y0 = pos[:, 0].min(), pos[:, 1].min()
+    cols = np.int64((pos[:, 0].max() - x0) / EMITTER_CELL_M) + 1
+    rows = np.int64((pos[:, 1].max() - y0) / EMITTER_CELL_M) + 1
+    box = np.empty((len(kind), 4), dtype=np.int64)
+    count = np.zeros(rows * cols + 1, dtype=np.int64)
+    for j in range(len(kind)):
+        lo_x = hi_x = centre[j, 0]
+        lo_y = hi_y = centre[j, 1]
+        for a in range(2):
+            reach = half[j, 0] * abs(u[j, a]) + half[j, 1] * abs(v[j, a]) + 0.03 * abs(n[j, a]) + 1e-6
+            if a == 0:
+                lo_x, hi_x = centre[j, 0] - reach, centre[j, 0] + reach
+            else:
+                lo_y, hi_y = centre[j, 1] - reach, centre[j, 1] + reach
+        c0 = min(max(np.int64(math.floor((lo_x - x0) / EMITTER_CELL_M)), 0), cols - 1)
+        c1 = min(max(np.int64(math.floor((hi_x - x0) / EMITTER_CELL_M)), 0), cols - 1)
+        r0 = min(max(np.int64(math.floor((lo_y - y0) / EMITTER_CELL_M)), 0), rows - 1)
+        r1 = min(max(np.int64(math.floor((hi_y - y0) / EMITTER_CELL_M)), 0), rows - 1)
+        box[j] = (c0, c1, r0, r1)
+        if kind[j] == 0:
+            for r in range(r0, r1 + 1):
+                for c in range(c0, c1 + 1):
+                    count[r * cols + c + 1] += 1
+    start = np.cumsum(count)
+    fill = start[:-1].copy()
+    listed = np.empty(start[-1], dtype=np.int64)
+    for j in range(len(kind)):  # in light order, so the last match in a cell's list is the last light
+        if kind[j] == 0:
+            for r in range(box[j, 2], box[j, 3] + 1):
+                for c in range(box[j, 0], box[j, 1] + 1):
+                    listed[fill[r * cols + c]] = j
+                    fill[r * cols + c] += 1
+    for i in range(len(pos)):
+        cell = min(np.int64((pos[i, 1] - y0) / EMITTER_CELL_M), rows - 1) * cols + min(
+            np.int64((pos[i, 0] - x0) / EMITTER_CELL_M), cols - 1
+        )
+        for m in range(start[cell], start[cell + 1]):
+            j = listed[m]
             dx, dy, dz = pos[i, 0] - centre[j, 0], pos[i, 1] - centre[j, 1], pos[i, 2] - centre[j, 2]
             behind = -(dx * n[j, 0] + dy * n[j, 1] + dz * n[j, 2])
             if behind <= -0.005 or behind >= 0.03:
@@ -594,6 +734,18 @@ def _emitters(pos, normals, kind, centre, u, v, n, half):
             dv = abs(dx * v[j, 0] + dy * v[j, 1] + dz * v[j, 2])
             if du < half[j, 0] and dv < half[j, 1]:
                 which[i] = j
+    return which
+
+
+def _emitters_reference(pos, normals, kind, centre, u, v, n, half) -> np.ndarray:
+    """The numpy twin of :func:`_emitters`: every surfel against every rect light (tests)."""
+    which = np.full(len(pos), -1, dtype=np.int64)
+    for j in np.flatnonzero(kind == 0):
+        d = pos - centre[j]
+        behind = -(d @ n[j])
+        inside = (behind > -0.005) & (behind < 0.03) & (normals @ n[j] > 0.9)
+        inside &= (np.abs(d @ u[j]) < half[j, 0]) & (np.abs(d @ v[j]) < half[j, 1])
+        which[inside] = j
     return which
 
 
@@ -619,8 +771,9 @@ def bake(
     emissive, which = emissive_mask(pos, normals, table)
     bucket = buckets(normals)
     # an odd offset keeps the usual planes (z = 0, the ceiling, walls on grid lines) off the cell boundaries
-    lo = pos.min(axis=0) - 2 * COARSE_M - 0.0137 if n else np.zeros(3)
-    span = (pos.max(axis=0) + 2 * COARSE_M - lo) if n else np.ones(3)
+    # per column: numpy's axis-0 reductions of an (N, 3) array are 20× slower
+    lo = np.array([pos[:, a].min() for a in range(3)]) - 2 * COARSE_M - 0.0137 if n else np.zeros(3)
+    span = (np.array([pos[:, a].max() for a in range(3)]) + 2 * COARSE_M - lo) if n else np.ones(3)
     dims = np.ceil(span / DEPTH_M).astype(np.int64) + 1  # bounds every axis at either cell size
     fine = Texels.of(pos, normals, bucket, TEXEL_M, lo, dims)
     fine_bucket = buckets(fine.normal)
@@ -664,13 +817,37 @@ def _direct(fine: Texels, table: LightTable, tracer: Tracer) -> np.ndarray:
     tex, light, dirs, dist = _shadow_rays(origin, e, MINOR_SHARE, table.kind, table.centre, table.u, table.v,
                                           table.half, table.radius)  # fmt: skip
     blocked = tracer.occluded(origin[tex], dirs, np.maximum(dist - RAY_OFFSET_M, 1e-4))
-    w = e[tex, light][:, None] * table.colour[light]
-    k = len(fine.keys)
-    num = sum_by(tex, w * ~blocked[:, None], k)
-    den = sum_by(tex, w, k)
-    ratio = np.where(den > 0, num / np.maximum(den, 1e-30), 1.0)
+    ratio = _lit_share(tex, light, blocked, e, table.colour)
     # one ray per texel and light is noise in a penumbra: the shadowed share is blurred along the surface
     return (e @ table.colour) * fine.blur(ratio, SHADOW_BLUR_PASSES)
+
+
+@nb.njit(cache=True)
+def _lit_share(tex, light, blocked, e, colour):  # pragma: no cover - compiled; twin: _lit_share_reference
+    """(K, 3) share of each texel's light (shadow rays weighted by their light's RGB irradiance) not blocked; 1 unlit."""
+    k = e.shape[0]
+    num = np.zeros((k, 3))
+    den = np.zeros((k, 3))
+    for r in range(len(tex)):
+        i, j = tex[r], light[r]
+        for c in range(3):
+            w = e[i, j] * colour[j, c]
+            num[i, c] += w * (0.0 if blocked[r] else 1.0)
+            den[i, c] += w
+    out = np.ones((k, 3))
+    for i in range(k):
+        for c in range(3):
+            if den[i, c] > 0:
+                out[i, c] = num[i, c] / max(den[i, c], 1e-30)
+    return out
+
+
+def _lit_share_reference(tex, light, blocked, e, colour) -> np.ndarray:
+    """The numpy twin of :func:`_lit_share` (tests)."""
+    w = e[tex, light][:, None] * colour[light]
+    num = np.column_stack([np.bincount(tex, weights=(w * ~blocked[:, None])[:, c], minlength=len(e)) for c in range(3)])
+    den = np.column_stack([np.bincount(tex, weights=w[:, c], minlength=len(e)) for c in range(3)])
+    return np.where(den > 0, num / np.maximum(den, 1e-30), 1.0)
 
 
 @nb.njit(cache=True, inline="always")

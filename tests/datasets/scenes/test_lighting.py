@@ -264,3 +264,61 @@ def test_ray_queries_split_over_threads_equal_one_query(monkeypatch: pytest.Monk
     np.testing.assert_array_equal(whole[0], split[0])
     for a, b in zip(whole[1], split[1], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_compiled_grouping_sums_blur_and_emitters_match_their_numpy_twins() -> None:
+    """The bake's compiled grouping, sums, surface blur, lit shares and emitter lookup equal plain numpy."""
+    from song.datasets.scenes import lighting as lit
+
+    rng = np.random.default_rng(5)
+    keys = rng.integers(0, 5_000, 60_000) * 7 - 3  # repeats, negatives
+    uniq, index = lit.group_keys(keys)
+    ref_uniq, ref_index = np.unique(keys, return_inverse=True)
+    np.testing.assert_array_equal(uniq, ref_uniq)
+    np.testing.assert_array_equal(index, ref_index)
+    values = rng.normal(size=(60_000, 4))
+    expected = np.column_stack([np.bincount(index, weights=values[:, c], minlength=len(uniq)) for c in range(4)])
+    assert np.array_equal(lit.sum_by(index, values, len(uniq)), expected)  # same additions, same order: bit for bit
+
+    # texels of points on a few axis planes: the blur against its numpy twin, bit for bit
+    pts = rng.uniform(0.0, 3.0, (40_000, 3))
+    normals = lit._AXES[rng.integers(0, 6, len(pts))]
+    axis = np.argmax(np.abs(normals), axis=1)
+    pts[np.arange(len(pts)), axis] = np.round(pts[np.arange(len(pts)), axis])  # on planes x, y or z = 0..3
+    lo, dims = np.full(3, -0.6137), np.array([400, 400, 400])
+    fine = lit.Texels.of(pts, normals, lit.buckets(normals), lit.TEXEL_M, lo, dims)
+    field = rng.uniform(size=(len(fine.keys), 3))
+    assert np.array_equal(fine.blur(field, 2), lit.blur_reference(fine, field, 2))
+
+    k, lights = 500, 7
+    e = rng.uniform(0, 2, (k, lights)) * (rng.uniform(size=(k, lights)) > 0.3)
+    tex, light = rng.integers(0, k, 4000), rng.integers(0, lights, 4000)
+    blocked, colour = rng.uniform(size=4000) > 0.5, rng.uniform(0.5, 1.0, (lights, 3))
+    assert np.array_equal(
+        lit._lit_share(tex, light, blocked, e, colour), lit._lit_share_reference(tex, light, blocked, e, colour)
+    )
+
+
+def test_emitter_lookup_finds_what_testing_every_light_finds() -> None:
+    """Surfels drawn as a light's face: the grid-culled lookup equals testing every surfel against every light."""
+    from song.datasets.scenes import lighting as lit
+
+    rng = np.random.default_rng(6)
+    n = 30_000
+    pos = np.column_stack([rng.uniform(0, 9, n), rng.uniform(0, 7, n), rng.choice([0.0, 1.2, 2.79, 2.8], n)])
+    normals = lit._AXES[rng.choice([4, 5, 1], n)]
+    kind = np.array([0, 0, 1, 0, 0])
+    centre = np.array([[2.0, 2.0, 2.8], [2.5, 2.2, 2.8], [4.0, 4.0, 2.0], [8.95, 3.0, 1.2], [7.0, 6.0, 2.8]])
+    down, west = np.array([0.0, 0, -1]), np.array([-1.0, 0, 0])
+    n_ = np.array([down, down, down, west, down])
+    u = np.array([[1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [0.6, 0.8, 0]])
+    v = np.cross(n_, u)
+    half = np.array([[0.6, 0.3], [0.6, 0.3], [0.1, 0.1], [1.0, 0.7], [0.9, 0.2]])
+    pos[:200] = centre[0] + rng.uniform(-0.7, 0.7, (200, 3)) * [1, 0.5, 0]  # around a light's edge
+    normals[:200] = [0.0, 0.0, -1.0]
+    pos[200:400] = centre[3] + rng.uniform(-1.1, 1.1, (200, 3)) * [0.02, 1, 1]  # on a wall light's face
+    normals[200:400] = [-1.0, 0.0, 0.0]
+    got = lit._emitters(pos, normals, kind, centre, u, v, n_, half)
+    want = lit._emitters_reference(pos, normals, kind, centre, u, v, n_, half)
+    np.testing.assert_array_equal(got, want)
+    assert all((got == j).any() for j in (0, 1, 3)) and (got >= 0).sum() > 250
