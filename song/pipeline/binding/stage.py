@@ -96,7 +96,9 @@ def run_binding(ctx: StageContext) -> list[str]:
     entries, written = [], []
     for ped_id, motion in motions:
         pick = picks[ped_id]
-        asset = assets.setdefault(pick, load_avatar(pool[pick]))
+        if pick not in assets:  # each identity read (and its content hash checked) once per scene
+            assets[pick] = load_avatar(pool[pick])
+        asset = assets[pick]
         scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)), ped_id)
         cache_file = CACHE_FILE.format(ped_id=ped_id)
         write_compact_cache(scene.path(cache_file), cache.root_pos, cache.local_quats, cache.rest_joints, cache.meta)
