@@ -38,17 +38,13 @@ from song.geometry.skeleton import JOINT_INDEX as J
 from song.geometry.skeleton import JOINT_NAMES, N_JOINTS, rest_joints
 from song.util import derive_rng
 
-GENERATOR_VERSION = 5
-SKIN_TONES = np.array(  # sRGB 0–1, light to deep (a spread of real skin reflectances)
-    [
-        [0.96, 0.84, 0.74],
-        [0.92, 0.76, 0.62],
-        [0.84, 0.64, 0.48],
-        [0.72, 0.52, 0.36],
-        [0.55, 0.37, 0.24],
-        [0.36, 0.23, 0.15],
-    ]
-)
+GENERATOR_VERSION = 6
+# The Monk Skin Tone (MST) scale: ten swatches, sRGB, light (MST 1) to deep (MST 10). Monk, E. (2023),
+# "The Monk Skin Tone Scale", SocArXiv, doi:10.31235/osf.io/pdf4c; the swatch colours as Google publishes
+# them with the scale (skintone.google, CC BY 4.0). Identities draw their place on the scale uniformly
+# (docs/avatars.md says why) and take the swatches' colour there, interpolated in linear light.
+MST_HEX = ("f6ede4", "f3e7db", "f7ead0", "eadaba", "d7bd96", "a07e56", "825c43", "604134", "3a312a", "292420")
+SKIN_TONES = np.array([[int(h[i : i + 2], 16) / 255.0 for i in (0, 2, 4)] for h in MST_HEX])
 HAIR_COLOURS = np.array(
     [
         [0.06, 0.05, 0.05],
@@ -104,6 +100,7 @@ class AvatarParams:
     accessory_colour: list[float]
     stripe_m: float = 0.04
     age_years: float = 30.0
+    skin_mst: float = 0.0  # place on the Monk Skin Tone scale (1 light – 10 deep)
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -122,6 +119,17 @@ def _colour(rng: np.random.Generator) -> list[float]:
     return [round(float(c), 4) for c in rgb]
 
 
+def skin_colour(mst: float) -> np.ndarray:
+    """The sRGB skin colour at a place on the Monk scale (1–10): its swatches mixed in linear light."""
+    from song.datasets.scenes.materials import linear_to_srgb, srgb_to_linear
+
+    place = float(np.clip(mst, 1.0, len(SKIN_TONES))) - 1.0
+    low = min(int(np.floor(place)), len(SKIN_TONES) - 2)
+    t = place - low
+    linear = srgb_to_linear(SKIN_TONES[low]) * (1 - t) + srgb_to_linear(SKIN_TONES[low + 1]) * t
+    return linear_to_srgb(linear)
+
+
 def _rounded(values) -> list[float]:
     return [round(float(c), 4) for c in values]
 
@@ -129,9 +137,8 @@ def _rounded(values) -> list[float]:
 def sample_params(rng: np.random.Generator) -> AvatarParams:
     """Draw one identity's parameters."""
     body = sample_body(rng)
-    tone = rng.uniform(0, len(SKIN_TONES) - 1)
-    low = int(np.floor(tone))
-    skin = SKIN_TONES[low] + (tone - low) * (SKIN_TONES[min(low + 1, len(SKIN_TONES) - 1)] - SKIN_TONES[low])
+    mst = float(rng.uniform(1.0, len(SKIN_TONES)))
+    skin = skin_colour(mst)
     dress = bool(rng.random() < (0.2 if body.sex == "female" else 0.02))
     skirt_p = 0.25 if body.sex == "female" else 0.02
     bottom = "skirt" if dress else str(rng.choice(BOTTOMS, p=[0.78 - skirt_p, 0.22, skirt_p]))
@@ -155,6 +162,7 @@ def sample_params(rng: np.random.Generator) -> AvatarParams:
         head_scale=body.head_scale,
         girth=round(float(np.clip(rng.normal(1.0, 0.07), 0.85, 1.25)), 4),
         skin=_rounded(skin),
+        skin_mst=round(mst, 3),
         top=str(rng.choice(TOPS, p=[0.5, 0.38, 0.12])),
         bottom=bottom,
         dress=dress,

@@ -119,6 +119,25 @@ def test_anthropometry_of_a_500_identity_pool_matches_ansur_ii() -> None:
     assert 1.0 < min(kids) and max(kids) < 1.7
 
 
+def test_skin_tones_of_a_500_identity_pool_cover_the_monk_scale_evenly() -> None:
+    """Skin colours are the Monk Skin Tone swatches (mixed in linear light), places drawn evenly over MST 1–10."""
+    from song.datasets.avatars.generate import MST_HEX, SKIN_TONES, skin_colour
+
+    assert SKIN_TONES.shape == (10, 3) and MST_HEX[0] == "f6ede4" and MST_HEX[-1] == "292420"
+    np.testing.assert_allclose(skin_colour(1.0), SKIN_TONES[0], atol=1e-9)  # a whole place is its swatch
+    np.testing.assert_allclose(skin_colour(7.0), SKIN_TONES[6], atol=1e-9)
+    np.testing.assert_allclose(skin_colour(10.0), SKIN_TONES[9], atol=1e-9)
+    params = [sample_params(derive_rng(11, "avatar", i)) for i in range(500)]
+    places = np.array([p.skin_mst for p in params])
+    assert places.min() >= 1.0 and places.max() <= 10.0
+    counts = np.histogram(places, bins=9, range=(1.0, 10.0))[0]  # one bin between each pair of swatches
+    assert counts.min() >= 35 and counts.max() <= 80, counts  # ~55.6 each: even over the scale
+    luma = np.array([p.skin for p in params]) @ np.array([0.2126, 0.7152, 0.0722])
+    assert (luma < 0.3).mean() > 0.2 and (luma > 0.8).mean() > 0.2  # deep and light skin both well represented
+    for p in params[:50]:
+        np.testing.assert_allclose(p.skin, skin_colour(p.skin_mst), atol=2e-3)  # colour and recorded place agree
+
+
 @pytest.fixture(scope="module")
 def full_avatars():
     return [generate_avatar(derive_rng(5, "avatar", i), f"f{i}", 40_000) for i in range(6)]
