@@ -118,6 +118,16 @@ def _face_hit(boxes: list[list[float]], frame: dict) -> bool:
     return any(math.hypot(b[0] + b[2] / 2 - hx, b[1] + b[3] / 2 - hy) <= tolerance for b in boxes)
 
 
+TONE_BANDS = {"MST 1-4": (1.0, 4.0), "MST 4-7": (4.0, 7.0), "MST 7-10": (7.0, 10.0)}  # Monk Skin Tone places
+
+
+def _tone_band(mst: float | None) -> str | None:
+    """The band of a place on the Monk Skin Tone scale (None for an avatar without one)."""
+    if mst is None or not mst:
+        return None
+    return next(name for name, (lo, hi) in TONE_BANDS.items() if mst < hi or hi == 10.0)
+
+
 def _share(hits: list[bool]) -> dict:
     return {"n": len(hits), "hits": int(sum(hits)), "share": round(float(np.mean(hits)), 3) if hits else None}
 
@@ -135,14 +145,20 @@ def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], s
     pose = {"frame": ([], [], []), "crop": ([], [], [])}  # found, keypoints within 10 %, errors
     hog, hog_fits, seg = [], [], []
     face_mp, face_haar, back_mp, back_haar = [], [], [], []
+    by_tone = {"mediapipe": {name: [] for name in TONE_BANDS}, "haar": {name: [] for name in TONE_BANDS}}
     for frame, det, ours, theirs in zip(frames, detections, masks, segmented, strict=True):
         d = frame["distance_m"]
         if frame["kind"] in ("face", "back"):
             mp_list, haar_list = (face_mp, face_haar) if frame["kind"] == "face" else (back_mp, back_haar)
+            band = _tone_band(frame.get("skin_mst")) if frame["kind"] == "face" else None
             if d <= 2.0:
                 mp_list.append(_face_hit(det["face_short"], frame))
+                if band:
+                    by_tone["mediapipe"][band].append(mp_list[-1])
             if d >= 1.5:
                 haar_list.append(_face_hit(det["haar"], frame))
+                if band:
+                    by_tone["haar"][band].append(haar_list[-1])
             continue
         box = frame["box"]
         box_h = box[3] - box[1]
@@ -179,6 +195,9 @@ def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], s
         "face_haar_1p5_2p5m": _share(face_haar),
         "face_from_behind_mediapipe_1_2m": _share(back_mp),
         "face_from_behind_haar_1p5_2p5m": _share(back_haar),
+        "faces_by_skin_tone": {
+            judge: {band: _share(hits) for band, hits in bands.items() if hits} for judge, bands in by_tone.items()
+        },
         "hog_2_8m": _share(hog),
         "hog_2_8m_window_fits": _share(hog_fits),
         "segmentation_iou_2_4m": {
@@ -269,6 +288,13 @@ def portrait(asset, distance: float, facing_deg: float, kind: str, out: Path, in
     return _frame_record(camera, joints, mask, distance, kind, name)
 
 
+def _skin_mst(asset_path: str) -> float | None:
+    """The avatar's place on the Monk Skin Tone scale, from its generator metadata (None for other assets)."""
+    from song.datasets.avatars import load_avatar
+
+    return load_avatar(asset_path).meta.get("generator", {}).get("skin_mst")
+
+
 def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: int) -> list[dict]:
     """Render the ``body`` and ``face`` frames into ``out`` (PNG + our masks) and return their records."""
     from song.datasets.bench import open_benchmark
@@ -320,11 +346,13 @@ def render_frames(bench_path: Path, out: Path, n_body: int, n_face: int, seed: i
                 continue
             name = _write_frame(out, len(frames), full.rgb, mask)
             record = _frame_record(camera, joints, mask, d, kind, name)
+            binding = next((b for b in episode.avatars if b.ped_id == track.ped_id), None)
             frames.append(
                 {
                     **record,
                     "episode": episode.episode_id,
                     "pedestrian": k,
+                    "skin_mst": _skin_mst(binding.asset_path) if binding and binding.asset_path else None,
                     "t": round(t, 3),
                     "facing_deg": round(math.degrees(phi), 1),
                 }

@@ -42,7 +42,7 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
     for index, joint in people.LIMBS.items():
         x, y = near["joints_px"][joint]
         landmarks[index] = [x, y + (60.0 if index in (27, 28) else 0.0), 1.0]  # ankles 0.2 box heights off
-    face = {"kind": "face", "distance_m": 1.5, "focal_px": 500.0, "head_px": [400.0, 200.0]}
+    face = {"kind": "face", "distance_m": 1.5, "focal_px": 500.0, "head_px": [400.0, 200.0], "skin_mst": 8.2}
     back = {**face, "kind": "back", "distance_m": 1.8}
     tolerance = 500.0 * people.FACE_TOLERANCE_M / 1.5  # 40 px at 1.5 m
     detections = [
@@ -67,6 +67,14 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
     assert figures["face_mediapipe_short_1_2m"]["hits"] == 1
     assert figures["face_haar_1p5_2p5m"]["hits"] == 0  # its centre lies just beyond the 0.12 m tolerance
     assert figures["face_from_behind_mediapipe_1_2m"] == {"n": 1, "hits": 1, "share": 1.0}  # a false alarm
+    # faces split by the avatar's Monk Skin Tone place (the back of a head is not a face)
+    assert figures["faces_by_skin_tone"] == {
+        "mediapipe": {"MST 7-10": {"n": 1, "hits": 1, "share": 1.0}},
+        "haar": {"MST 7-10": {"n": 1, "hits": 0, "share": 0.0}},
+    }
+    assert [people._tone_band(m) for m in (None, 1.0, 3.99, 4.0, 6.9, 7.0, 10.0)] == [
+        None, "MST 1-4", "MST 1-4", "MST 4-7", "MST 4-7", "MST 7-10", "MST 7-10"
+    ]  # fmt: skip
 
 
 def _detectors_ready() -> str | None:
