@@ -95,3 +95,22 @@ def pack_vertices(
                 shift -= 10
         rotation[i] = word
     return position, rotation, scale, colour
+
+
+@nb.njit(cache=True)
+def turn_quats(turn, quats):  # pragma: no cover - compiled; twin: song.geometry.rotations.quat_mul (tested)
+    """``turn ⊗ q`` for every row of ``quats`` (N, 4) float32, in float64 as ``quat_mul``, rounded to float32."""
+    aw, ax, ay, az = turn[0], turn[1], turn[2], turn[3]
+    out = np.empty(quats.shape, dtype=np.float32)
+    for i in range(quats.shape[0]):
+        bw, bx, by, bz = (
+            np.float64(quats[i, 0]),
+            np.float64(quats[i, 1]),
+            np.float64(quats[i, 2]),
+            np.float64(quats[i, 3]),
+        )
+        out[i, 0] = aw * bw - ax * bx - ay * by - az * bz
+        out[i, 1] = aw * bx + ax * bw + ay * bz - az * by
+        out[i, 2] = aw * by - ax * bz + ay * bw + az * bx
+        out[i, 3] = aw * bz + ax * by - ay * bx + az * bw
+    return out

@@ -814,9 +814,9 @@ def _direct(fine: Texels, table: LightTable, tracer: Tracer) -> np.ndarray:
     # wall would see the panel or window set just before it); shadow rays leave from above the surfels' mean
     e = _per_light(fine.centres(), fine.normal, table.kind, table.centre, table.u, table.v, table.n, table.half,
                    table.scale, table.radius)  # fmt: skip
-    tex, light, dirs, dist = _shadow_rays(origin, e, MINOR_SHARE, table.kind, table.centre, table.u, table.v,
-                                          table.half, table.radius)  # fmt: skip
-    blocked = tracer.occluded(origin[tex], dirs, np.maximum(dist - RAY_OFFSET_M, 1e-4))
+    tex, light, starts, dirs, reach = _shadow_rays(origin, e, MINOR_SHARE, RAY_OFFSET_M, table.kind, table.centre,
+                                                   table.u, table.v, table.half, table.radius)  # fmt: skip
+    blocked = tracer.occluded(starts, dirs, reach)
     ratio = _lit_share(tex, light, blocked, e, table.colour)
     # one ray per texel and light is noise in a penumbra: the shadowed share is blurred along the surface
     return (e @ table.colour) * fine.blur(ratio, SHADOW_BLUR_PASSES)
@@ -873,8 +873,12 @@ def _light_point(j, index, kind, centre, u, v, half, radius):
 
 
 @nb.njit(cache=True)
-def _shadow_rays(origin, e, minor, kind, centre, u, v, half, radius):
-    """(receiver, light, unit direction, distance) of one shadow ray per receiver and non-minor light."""
+def _shadow_rays(origin, e, minor, short, kind, centre, u, v, half, radius):
+    """One shadow ray per receiver and non-minor light: (receiver, light, start, unit direction, length).
+
+    Starts, directions and lengths come as the float32 the tracer takes; a ray stops ``short`` of the
+    light (at least 0.1 mm long).
+    """
     m, nl = e.shape
     keep = np.zeros((m, nl), dtype=np.bool_)
     count = 0
@@ -888,8 +892,9 @@ def _shadow_rays(origin, e, minor, kind, centre, u, v, half, radius):
                 count += 1
     tex = np.empty(count, dtype=np.int64)
     light = np.empty(count, dtype=np.int64)
-    dirs = np.empty((count, 3))
-    dist = np.empty(count)
+    starts = np.empty((count, 3), dtype=np.float32)
+    dirs = np.empty((count, 3), dtype=np.float32)
+    reach = np.empty(count, dtype=np.float32)
     k = 0
     for i in range(m):
         for j in range(nl):
@@ -899,10 +904,11 @@ def _shadow_rays(origin, e, minor, kind, centre, u, v, half, radius):
             dx, dy, dz = px - origin[i, 0], py - origin[i, 1], pz - origin[i, 2]
             d = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-12)
             tex[k], light[k] = i, j
+            starts[k, 0], starts[k, 1], starts[k, 2] = origin[i, 0], origin[i, 1], origin[i, 2]
             dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx / d, dy / d, dz / d
-            dist[k] = d
+            reach[k] = max(d - short, 1e-4)
             k += 1
-    return tex, light, dirs, dist
+    return tex, light, starts, dirs, reach
 
 
 def _gather(coarse, fine, fine_direct, fine_albedo, tracer) -> np.ndarray:
@@ -991,9 +997,9 @@ def _probes(floor, table, tracer, fine, coarse, fine_direct, fine_albedo, indire
             for axis in _AXES:
                 e += _per_light(pts, np.tile(axis, (m, 1)), table.kind, table.centre, table.u, table.v, table.n,
                                 table.half, table.scale, table.radius) / 6  # fmt: skip
-            p, light, dirs_l, dist = _shadow_rays(pts, e, 0.0, table.kind, table.centre, table.u, table.v, table.half,
-                                                  table.radius)  # fmt: skip
-            blocked = tracer.occluded(pts[p], dirs_l, np.maximum(dist - 0.01, 1e-4))
+            p, light, starts, dirs_l, reach = _shadow_rays(pts, e, 0.0, 0.01, table.kind, table.centre, table.u,
+                                                           table.v, table.half, table.radius)  # fmt: skip
+            blocked = tracer.occluded(starts, dirs_l, reach)
             w = e[p, light][:, None] * table.colour[light] * ~blocked[:, None]
             direct = sum_by(p, w, m)
         dirs = np.tile(_sphere(PROBE_RAYS), (m, 1))

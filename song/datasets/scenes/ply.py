@@ -224,16 +224,15 @@ def read_gaussian_ply(path: str | Path) -> GaussianCloud:
 
 def _turned(cloud: GaussianCloud, inverse: bool = False) -> GaussianCloud:
     """The cloud turned +90° about x (SONG → viewer frame), or back with ``inverse``."""
-    from song.geometry.rotations import quat_conj, quat_mul
+    from song.datasets.scenes._ply_kernel import turn_quats
+    from song.geometry.rotations import quat_conj
 
-    x, y, z = cloud.means.astype(np.float64).T
-    means = np.column_stack([x, z, -y] if inverse else [x, -z, y])
+    means = np.asarray(cloud.means, dtype=np.float32)
+    x, y, z = means[:, 0], means[:, 1], means[:, 2]
+    means = np.column_stack([x, z, -y] if inverse else [x, -z, y])  # exact: a quarter turn permutes and negates
     turn = quat_conj(TURN_TO_VIEWER) if inverse else TURN_TO_VIEWER
-    quats = quat_mul(np.broadcast_to(turn, cloud.quats.shape), cloud.quats.astype(np.float64))
-    return GaussianCloud(
-        means.astype(np.float32), quats.astype(np.float32), cloud.log_scales, cloud.opacity_logits, cloud.sh_dc,
-        cloud.sh_rest,
-    )  # fmt: skip
+    quats = turn_quats(np.asarray(turn, dtype=np.float64), np.ascontiguousarray(cloud.quats, dtype=np.float32))
+    return GaussianCloud(means, quats, cloud.log_scales, cloud.opacity_logits, cloud.sh_dc, cloud.sh_rest)
 
 
 def _check_finite(cloud: GaussianCloud, path: Path) -> None:

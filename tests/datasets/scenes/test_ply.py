@@ -278,3 +278,16 @@ def test_scenes_are_stored_upright_for_3dgs_viewers_and_read_back_in_our_frame(t
     assert _angle_deg(back.quats, cloud.quats).max() < 0.25  # the turn was undone on the rotations too
     with pytest.raises(ValueError, match="SH degree 0"):
         write_compressed_ply(tmp_path / "sh.ply", _random_cloud(10, 1, sh=3), viewer_frame=True)
+
+
+def test_compiled_viewer_turn_matches_quat_mul() -> None:
+    """The compiled quarter turn of the splats' rotations equals ``quat_mul`` in float64, rounded to float32."""
+    from song.datasets.scenes._ply_kernel import turn_quats
+    from song.datasets.scenes.ply import TURN_TO_VIEWER
+    from song.geometry.rotations import quat_conj, quat_mul
+
+    rng = np.random.default_rng(4)
+    q = rng.normal(size=(5000, 4)).astype(np.float32)
+    for turn in (TURN_TO_VIEWER, quat_conj(TURN_TO_VIEWER)):
+        want = quat_mul(np.broadcast_to(turn, q.shape), q.astype(np.float64)).astype(np.float32)
+        np.testing.assert_array_equal(turn_quats(np.asarray(turn, dtype=np.float64), q), want)
