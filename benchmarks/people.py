@@ -42,6 +42,7 @@ other pedestrians are left out, so each frame shows one person). 960×540, 70° 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import subprocess
@@ -123,9 +124,9 @@ TONE_BANDS = {"MST 1-4": (1.0, 4.0), "MST 4-7": (4.0, 7.0), "MST 7-10": (7.0, 10
 
 def _tone_band(mst: float | None) -> str | None:
     """The band of a place on the Monk Skin Tone scale (None for an avatar without one)."""
-    if mst is None or not mst:
+    if not mst:
         return None
-    return next(name for name, (lo, hi) in TONE_BANDS.items() if mst < hi or hi == 10.0)
+    return next((name for name, (_, hi) in TONE_BANDS.items() if mst < hi), "MST 7-10")  # 10 is in the last
 
 
 def _share(hits: list[bool]) -> dict:
@@ -288,6 +289,7 @@ def portrait(asset, distance: float, facing_deg: float, kind: str, out: Path, in
     return _frame_record(camera, joints, mask, distance, kind, name)
 
 
+@functools.cache
 def _skin_mst(asset_path: str) -> float | None:
     """The avatar's place on the Monk Skin Tone scale, from its generator metadata (None for other assets)."""
     from song.datasets.avatars import load_avatar

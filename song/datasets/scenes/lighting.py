@@ -692,18 +692,13 @@ def _emitters(pos, normals, kind, centre, u, v, n, half):  # pragma: no cover - 
     box = np.empty((len(kind), 4), dtype=np.int64)
     count = np.zeros(rows * cols + 1, dtype=np.int64)
     for j in range(len(kind)):
-        lo_x = hi_x = centre[j, 0]
-        lo_y = hi_y = centre[j, 1]
-        for a in range(2):
-            reach = half[j, 0] * abs(u[j, a]) + half[j, 1] * abs(v[j, a]) + 0.03 * abs(n[j, a]) + 1e-6
-            if a == 0:
-                lo_x, hi_x = centre[j, 0] - reach, centre[j, 0] + reach
-            else:
-                lo_y, hi_y = centre[j, 1] - reach, centre[j, 1] + reach
-        c0 = min(max(np.int64(math.floor((lo_x - x0) / EMITTER_CELL_M)), 0), cols - 1)
-        c1 = min(max(np.int64(math.floor((hi_x - x0) / EMITTER_CELL_M)), 0), cols - 1)
-        r0 = min(max(np.int64(math.floor((lo_y - y0) / EMITTER_CELL_M)), 0), rows - 1)
-        r1 = min(max(np.int64(math.floor((hi_y - y0) / EMITTER_CELL_M)), 0), rows - 1)
+        # half the box's extent along x and y
+        rx = half[j, 0] * abs(u[j, 0]) + half[j, 1] * abs(v[j, 0]) + 0.03 * abs(n[j, 0]) + 1e-6
+        ry = half[j, 0] * abs(u[j, 1]) + half[j, 1] * abs(v[j, 1]) + 0.03 * abs(n[j, 1]) + 1e-6
+        c0 = min(max(np.int64(math.floor((centre[j, 0] - rx - x0) / EMITTER_CELL_M)), 0), cols - 1)
+        c1 = min(max(np.int64(math.floor((centre[j, 0] + rx - x0) / EMITTER_CELL_M)), 0), cols - 1)
+        r0 = min(max(np.int64(math.floor((centre[j, 1] - ry - y0) / EMITTER_CELL_M)), 0), rows - 1)
+        r1 = min(max(np.int64(math.floor((centre[j, 1] + ry - y0) / EMITTER_CELL_M)), 0), rows - 1)
         box[j] = (c0, c1, r0, r1)
         if kind[j] == 0:
             for r in range(r0, r1 + 1):
