@@ -238,16 +238,24 @@ def _created() -> str:
     return moment.replace(microsecond=0).isoformat().replace("+00:00", "Z")
 
 
-def manifest_rows(release: Path, rows_by_path: dict[str, int]) -> list[dict[str, Any]]:
-    """One row per file of the release except ``meta/info.json`` and the manifest itself, sorted."""
+def manifest_rows(
+    release: Path, rows_by_path: dict[str, int], stored: dict[str, dict] | None = None
+) -> list[dict[str, Any]]:
+    """One row per file of the release except ``meta/info.json`` and the manifest itself, sorted.
+
+    ``stored``: the blobs this export copied (:meth:`BlobStore.stored`), hashed as they were written;
+    their digests are reused when the file still has the size written, every other file is hashed.
+    """
+    stored = stored or {}
     rows = []
     for path in sorted(release.rglob("*")):
         rel = path.relative_to(release).as_posix()
         if not path.is_file() or rel in (INFO_PATH, MANIFEST_PATH):
             continue
-        rows.append(
-            {"path": rel, "sha256": sha256_file(path), "bytes": path.stat().st_size, "rows": rows_by_path.get(rel)}
-        )
+        size = path.stat().st_size
+        known = stored.get(rel)
+        digest = known["sha256"] if known is not None and known["bytes"] == size else sha256_file(path)
+        rows.append({"path": rel, "sha256": digest, "bytes": size, "rows": rows_by_path.get(rel)})
     return rows
 
 
@@ -365,7 +373,7 @@ def export_bench(
             rows_by_path[rel] = write_parquet(tmp / rel, table, schema, name, version)
         counts = _counts(episodes, len(scene_ids), len(avatar_rows))
         (tmp / CHANGELOG_PATH).write_text(_changelog(version, parent, notes, counts), encoding="utf-8")
-        manifest = manifest_rows(tmp, rows_by_path)
+        manifest = manifest_rows(tmp, rows_by_path, blobs.stored())
         write_parquet(tmp / MANIFEST_PATH, pa.Table.from_pylist(manifest, MANIFEST), MANIFEST, "manifest", version)
         info = _release_info(version, parent, notes, run_info, counts, tables, rows_by_path)
         fingerprint = fingerprint_of(manifest, info.model_dump(mode="json"))

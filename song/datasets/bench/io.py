@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import shutil
+import hashlib
+import os
 from pathlib import Path
 
 import pyarrow as pa
@@ -18,7 +19,9 @@ from song.datasets.bench.schema import (
     ROW_GROUP_SIZE,
     SCHEMA_VERSION,
 )
-from song.util import sha256_file
+from song.util import CHUNK_BYTES
+
+BLOB_STAGING = "blobs/.incoming"  # a blob being copied and hashed; renamed to its address when done
 
 
 def write_parquet(path: Path, table: pa.Table, schema: pa.Schema, name: str, dataset_version: str) -> int:
@@ -48,25 +51,46 @@ class BlobStore:
     def __init__(self, release_root: Path) -> None:
         self.root = release_root
         self._known: dict[str, dict] = {}
-        self._digests: dict[Path, str] = {}
+        self._by_source: dict[Path, str] = {}
 
     def add(self, source: Path | None) -> dict | None:
         """Copy ``source`` into the store (once per content) and return its ``{path, sha256, bytes}``.
 
-        Each source file is hashed once per store: an avatar asset (~3 MB) is shared by many pedestrians,
-        and a 500-scene release hashed ~11 GB of them again, once per pedestrian.
+        Each source file is read once per store: its bytes are hashed as they are copied to a staging
+        file, which is then renamed to its content address (or dropped when that content is already
+        stored), so the recorded sha256 is the stored copy's by construction. An avatar asset (~3 MB)
+        is shared by many pedestrians and copied once.
         """
         if source is None or not source.is_file():
             return None
         key = source.resolve()
-        if key not in self._digests:
-            self._digests[key] = sha256_file(source)
-        digest = self._digests[key]
-        ext = "".join(source.suffixes[-1:])
-        rel = BLOB_PATH.format(prefix=digest[:2], sha256=digest, ext=ext)
-        if rel not in self._known:
-            target = self.root / rel
-            target.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(source, target)
-            self._known[rel] = {"path": rel, "sha256": digest, "bytes": target.stat().st_size}
-        return self._known[rel]
+        if key not in self._by_source:
+            self._by_source[key] = self._copy_in(source)
+        return self._known[self._by_source[key]]
+
+    def stored(self) -> dict[str, dict]:
+        """``{release-relative path: {path, sha256, bytes}}`` of every blob stored so far."""
+        return dict(self._known)
+
+    def _copy_in(self, source: Path) -> str:
+        staging = self.root / BLOB_STAGING
+        staging.parent.mkdir(parents=True, exist_ok=True)
+        digest, size = hashlib.sha256(), 0
+        try:
+            with open(source, "rb") as src, open(staging, "wb") as dst:
+                for block in iter(lambda: src.read(CHUNK_BYTES), b""):
+                    digest.update(block)
+                    dst.write(block)
+                    size += len(block)
+            sha = digest.hexdigest()
+            rel = BLOB_PATH.format(prefix=sha[:2], sha256=sha, ext="".join(source.suffixes[-1:]))
+            if rel in self._known:
+                staging.unlink()
+            else:
+                target = self.root / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(staging, target)
+                self._known[rel] = {"path": rel, "sha256": sha, "bytes": size}
+        finally:
+            staging.unlink(missing_ok=True)
+        return rel
