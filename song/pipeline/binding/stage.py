@@ -12,6 +12,8 @@ body height (the root alignment: ``diag(s, s, s, 1)``, recorded). Outputs under 
 from __future__ import annotations
 
 import shutil
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -49,6 +51,53 @@ def _motions(scene: SceneFolder) -> list[tuple[int, LoadedMotion]]:
     return out
 
 
+@dataclass(frozen=True)
+class _Identity:
+    """What binding reads of a pool avatar: its id, rest height, rest skeleton and content hash."""
+
+    avatar_id: str
+    height_m: float
+    rest_joints: np.ndarray
+    sha256: str
+
+
+_VERIFIED: dict[tuple[str, int, int], _Identity] = {}
+
+
+def _verified_identity(path: Path) -> _Identity:
+    """A pool avatar's identity, read and its content hash checked once per process.
+
+    Keyed by the file's resolved path, size and modification time: a worker binding hundreds of scenes
+    reads each of the pool's identities once, and an asset rewritten meanwhile is read (and checked) again.
+    """
+    stat = path.stat()
+    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    if key not in _VERIFIED:
+        asset = load_avatar(path)
+        _VERIFIED[key] = _Identity(asset.avatar_id, asset.height_m, asset.rest_joints, asset.meta.get("sha256", ""))
+    return _VERIFIED[key]
+
+
+def _motion_cache(identity: _Identity, motion: LoadedMotion, fps: float, ped_id: int | None) -> MotionCache:
+    scale = float(motion.height_m) / identity.height_m
+    rest = (identity.rest_joints * scale).astype(np.float32)  # exactly AvatarAsset.scaled's rest skeleton
+    alignment = np.diag([scale, scale, scale, 1.0])
+    meta: dict[str, Any] = {
+        "ped_id": int(motion.meta.get("ped_id", -1)) if ped_id is None else int(ped_id),
+        "avatar_id": identity.avatar_id,
+        "avatar_sha256": identity.sha256,
+        "height_m": round(float(motion.height_m), 6),
+        "scale": scale,
+        "alignment": alignment.ravel().tolist(),
+        "fps": fps,
+        "frame0": int(motion.frame[0]),
+        "skeleton_mismatch_m": round(float(np.abs(rest - motion.rest_joints).max()), 6),
+    }
+    return MotionCache(
+        motion.root_pos.astype(np.float32), motion.local_quats.astype(np.float32), rest, fps, int(motion.frame[0]), meta
+    )
+
+
 def bind_motion(
     asset: AvatarAsset, motion: LoadedMotion, fps: float, ped_id: int | None = None
 ) -> tuple[AvatarAsset, MotionCache]:
@@ -56,29 +105,9 @@ def bind_motion(
 
     ``ped_id``: the pedestrian's id (default: the motion's meta, −1 without one).
     """
-    scale = float(motion.height_m) / asset.height_m
-    scaled = asset.scaled(scale)
-    alignment = np.diag([scale, scale, scale, 1.0])
-    meta: dict[str, Any] = {
-        "ped_id": int(motion.meta.get("ped_id", -1)) if ped_id is None else int(ped_id),
-        "avatar_id": asset.avatar_id,
-        "avatar_sha256": asset.meta.get("sha256", ""),
-        "height_m": round(float(motion.height_m), 6),
-        "scale": scale,
-        "alignment": alignment.ravel().tolist(),
-        "fps": fps,
-        "frame0": int(motion.frame[0]),
-        "skeleton_mismatch_m": round(float(np.abs(scaled.rest_joints - motion.rest_joints).max()), 6),
-    }
-    cache = MotionCache(
-        motion.root_pos.astype(np.float32),
-        motion.local_quats.astype(np.float32),
-        scaled.rest_joints.astype(np.float32),
-        fps,
-        int(motion.frame[0]),
-        meta,
-    )
-    return scaled, cache
+    identity = _Identity(asset.avatar_id, asset.height_m, asset.rest_joints, asset.meta.get("sha256", ""))
+    cache = _motion_cache(identity, motion, fps, ped_id)
+    return asset.scaled(cache.meta["scale"]), cache
 
 
 def run_binding(ctx: StageContext) -> list[str]:
@@ -92,28 +121,25 @@ def run_binding(ctx: StageContext) -> list[str]:
         shutil.rmtree(out_dir)  # a rerun replaces the whole folder (no stale caches of removed pedestrians)
     out_dir.mkdir(parents=True)
     picks = identity_picks(ctx.config, ctx.scene_id, _scene_ped_ids(scene, [k for k, _ in motions]), len(pool))
-    assets: dict[int, AvatarAsset] = {}
     entries, written = [], []
     for ped_id, motion in motions:
-        pick = picks[ped_id]
-        if pick not in assets:  # each identity read (and its content hash checked) once per scene
-            assets[pick] = load_avatar(pool[pick])
-        asset = assets[pick]
-        scaled, cache = bind_motion(asset, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)), ped_id)
+        path = pool[picks[ped_id]]
+        identity = _verified_identity(path)
+        cache = _motion_cache(identity, motion, float(motion.meta.get("fps", ctx.config.crowd.fps)), ped_id)
         cache_file = CACHE_FILE.format(ped_id=ped_id)
         write_compact_cache(scene.path(cache_file), cache.root_pos, cache.local_quats, cache.rest_joints, cache.meta)
         written.append(cache_file)
         materialized = None
         if cfg.materialize:
             materialized = MATERIALIZED_FILE.format(ped_id=ped_id)
-            write_materialized_cache(scene.path(materialized), scaled, cache)
+            write_materialized_cache(scene.path(materialized), load_avatar(path).scaled(cache.meta["scale"]), cache)
             written.append(materialized)
         entries.append(
             BindingRecord(
                 ped_id=ped_id,
-                avatar_id=asset.avatar_id,
-                asset_path=str(pool[pick].resolve()),
-                asset_sha256=asset.meta.get("sha256", ""),
+                avatar_id=identity.avatar_id,
+                asset_path=str(path.resolve()),
+                asset_sha256=identity.sha256,
                 cache_file=cache_file,
                 materialized_file=materialized,
                 height_m=cache.meta["height_m"],

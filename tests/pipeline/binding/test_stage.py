@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -162,3 +163,24 @@ def test_materialized_cache_on_the_torch_path_matches_numpy(make_scene, tmp_path
     assert np.abs(a.positions.astype(np.float32) - c.positions.astype(np.float32)).max() <= 2e-3
     dots = np.abs((a.rotations.astype(np.float32) * c.rotations.astype(np.float32)).sum(-1))
     assert dots.min() > 0.999
+
+
+def test_a_pool_avatar_is_checked_once_per_process_and_again_once_rewritten(tmp_path, monkeypatch) -> None:
+    from song.pipeline.binding import stage
+
+    monkeypatch.setattr(stage, "_VERIFIED", {})
+    reads = []
+    real = stage.load_avatar
+    monkeypatch.setattr(stage, "load_avatar", lambda path: reads.append(path) or real(path))
+    path = save_avatar(capsule_avatar("a1", n=300), tmp_path)
+    first = stage._verified_identity(path)
+    assert stage._verified_identity(path) is first and len(reads) == 1
+    # a rewritten asset is read again, and a corrupted one is refused rather than served from memory
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["rest_joints"] = arrays["rest_joints"] * np.float32(1.01)
+    np.savez(path, **arrays)
+    os.utime(path, ns=(1, 1))
+    with pytest.raises(FormatError, match=r"a1\.avatar\.npz.*sha256"):
+        stage._verified_identity(path)
+    assert len(reads) == 2
