@@ -114,3 +114,73 @@ def test_missing_usd_core_names_the_extra(monkeypatch: pytest.MonkeyPatch, tmp_p
         with pytest.raises(MissingDependencyError) as info:
             call()
         assert info.value.module == "pxr" and info.value.extra == "usd" and "song[usd]" in str(info.value)
+
+
+def _every_kind_of_prim():
+    from song.datasets.scenes.lights import Light
+    from song.datasets.scenes.usd import ProxyMesh
+
+    tetra = ProxyMesh(
+        "lamp base",
+        np.array([[0, 0, 0], [0.3, 0, 0], [0, 0.3, 0], [0, 0, 0.4]]),
+        np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]]),
+        material="metal_steel",
+        label="lamp",
+        convex=True,
+    )
+    floor = ProxyMesh(
+        "floor 0", np.array([[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0]]), np.array([[0, 1, 2], [0, 2, 3]])
+    )
+    solids = [
+        ProxyBox("wall|1", np.array([[0, 0], [4, 0], [4, 0.1], [0, 0.1]]), 0.0, 2.5),
+        tetra,
+        ProxyMesh("bare", tetra.vertices + 1.0, tetra.faces),
+        ProxyMesh("painted", tetra.vertices + 2.0, tetra.faces, material="paint:#a0b0c0", label="wall"),
+    ]
+    surfaces = [
+        ProxyMesh("floor 0", floor.vertices, floor.faces, material="tiles_grey", label="floor"),
+        ProxyMesh("ceiling", floor.vertices + [0, 0, 2.5], floor.faces[:, ::-1], material="metal_steel"),
+    ]
+    rooms = [ProxyMesh("room_office", floor.vertices, floor.faces, label="office")]
+    lights = [
+        Light(id="panel 0", kind="rect", role="ceiling", position=(1, 1, 2.49), size=(0.6, 1.2), power_w=40),
+        Light(id="lamp", kind="point", role="lamp", position=(0.1, 0.1, 0.5), radius=0.05, power_w=7.5),
+        Light(id="window", kind="rect", role="window", position=(0, 1.5, 1.4), normal=(1, 0, 0), u_axis=(0, 1, 0),
+              size=(1.0, 1.2), colour=(0.9, 0.95, 1.1), power_w=120),
+    ]  # fmt: skip
+    return solids, surfaces, rooms, lights
+
+
+@pytest.mark.parametrize("metadata", [False, True])
+def test_the_written_layer_equals_the_usd_schema_classes_twin(tmp_path: Path, metadata: bool) -> None:
+    from tests.datasets.scenes.usd_schema_twin import usd_proxy_text
+
+    solids, surfaces, rooms, lights = _every_kind_of_prim()
+    hints = ('{"openings":[]}', '{"spacing":0.5}') if metadata else (None, None)
+    write_usd_proxy(tmp_path / "p.usda", solids, surfaces, hints[0], rooms, lights, hints[1])
+    text = (tmp_path / "p.usda").read_text()
+    assert text == usd_proxy_text(solids, surfaces, hints[0], rooms, lights, hints[1])
+    for needle in ("SphereLight", "RectLight", "convexHull", 'purpose = "guide"', "paint__a0b0c0", "roughness = 0.4"):
+        assert needle in text
+    assert ("song_dressing" in text) == metadata
+    # only the obstacles are read back as colliders, with their materials
+    assert [(m.name, m.material) for m in read_usd_proxy(tmp_path / "p.usda")] == [
+        ("wall_1", None),
+        ("lamp_base", "metal_steel"),
+        ("bare", None),
+        ("painted", "paint:#a0b0c0"),
+    ]
+
+
+def test_a_generated_scene_proxy_equals_the_usd_schema_classes_twin(tmp_path: Path, monkeypatch) -> None:
+    from song.datasets.scenes import usd
+    from song.datasets.scenes.generate import generate_scene
+    from tests.datasets.scenes.usd_schema_twin import usd_proxy_text
+
+    calls = []
+    real = usd.write_usd_proxy
+    monkeypatch.setattr(usd, "write_usd_proxy", lambda path, *a, **k: calls.append((a, k)) or real(path, *a, **k))
+    root = generate_scene("office_0000", "office", 0, tmp_path, splat=False)
+    assert len(calls) == 1
+    args, kwargs = calls[0]
+    assert (root / "scene_flat.usda").read_text() == usd_proxy_text(*args, **kwargs)
