@@ -35,6 +35,10 @@ other pedestrians are left out, so each frame shows one person). 960×540, 70° 
   holds its person in the central 96 of its window's 128 rows). Target ≥ 95 %.
   Also on the frames where HOG's window can hold the person at all (box height × 128/96 ≤ the frame's
   height: a person nearer than ~3.5 m fills the frame's height and no window fits).
+- Face brightness (``face_luma_by_skin_tone``): on ``face`` frames, the median display luma (Rec. 709 weights
+  on the sRGB values) of the mid-face patch (0.05 m square, 0.06 m above the head joint, which sits level
+  with the chin: nose and cheeks), by Monk band, against the luma of the avatar's skin swatch: how much
+  darker the scene's light renders a face than its swatch.
 - Segmentation: MediaPipe's person mask on a square crop (side 1.25 × the box height) against our
   alpha > 0.5, IoU inside the crop, ``body`` frames at d ∈ [2, 4]. Target ≥ 0.8 (median).
 """
@@ -77,6 +81,10 @@ LIMBS = {
 FACE_TOLERANCE_M = 0.12
 HOG_WINDOW_RATIO = 128 / 96  # the HOG window's height over the person's height in its training crops
 FACE_CROP_M = 0.6
+# the mid-face patch (nose and cheeks, below the eyes, above the mouth): a square of this side, centred this
+# far above the head joint (which sits at the base of the skull, level with the chin), in metres
+FACE_PATCH_M, FACE_PATCH_RISE_M = 0.05, 0.06
+LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 luma weights, applied to sRGB-encoded values
 
 
 def ensure_detectors() -> Path:
@@ -119,6 +127,25 @@ def _face_hit(boxes: list[list[float]], frame: dict) -> bool:
     return any(math.hypot(b[0] + b[2] / 2 - hx, b[1] + b[3] / 2 - hy) <= tolerance for b in boxes)
 
 
+def face_luma(rgb: np.ndarray, mask: np.ndarray, frame: dict) -> float | None:
+    """Median display luma (0–1) of the mid-face patch of a ``face`` frame (level camera), inside our mask."""
+    f, d = frame["focal_px"], frame["distance_m"]
+    half = max(1, round(f * FACE_PATCH_M / d / 2))
+    cx, cy = round(frame["head_px"][0]), round(frame["head_px"][1] - f * FACE_PATCH_RISE_M / d)
+    window = (slice(max(cy - half, 0), cy + half), slice(max(cx - half, 0), cx + half))
+    inside = mask[window]
+    if inside.sum() < 4:
+        return None
+    return float(np.median(rgb[window][inside].astype(np.float64) @ LUMA / 255.0))
+
+
+def swatch_luma(mst: float) -> float:
+    """Display luma of the skin colour the pool gives at a place on the Monk scale (the colour as the avatar's albedo)."""
+    from song.datasets.avatars.generate import skin_colour
+
+    return float(skin_colour(mst) @ LUMA)
+
+
 TONE_BANDS = {"MST 1-4": (1.0, 4.0), "MST 4-7": (4.0, 7.0), "MST 7-10": (7.0, 10.0)}  # Monk Skin Tone places
 
 
@@ -133,7 +160,13 @@ def _share(hits: list[bool]) -> dict:
     return {"n": len(hits), "hits": int(sum(hits)), "share": round(float(np.mean(hits)), 3) if hits else None}
 
 
-def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], segmented: list[np.ndarray]) -> dict:
+def score(
+    frames: list[dict],
+    detections: list[dict],
+    masks: list[np.ndarray],
+    segmented: list[np.ndarray],
+    lumas: list[float | None] | None = None,
+) -> dict:
     """The figures from the frames' ground truth and the detectors' raw outputs (see the module docstring).
 
     Args:
@@ -142,16 +175,21 @@ def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], s
         detections: per frame ``pose`` (33 × [x, y, visibility] or None), ``face_short`` and ``haar``
             (lists of [x, y, w, h, …]), ``hog`` (lists of [x, y, w, h, weight]).
         masks: our person mask per frame (alpha > 0.5, unoccluded). segmented: MediaPipe's mask per frame.
+        lumas: :func:`face_luma` per frame (None where not measured).
     """
     pose = {"frame": ([], [], []), "crop": ([], [], [])}  # found, keypoints within 10 %, errors
     hog, hog_fits, seg = [], [], []
     face_mp, face_haar, back_mp, back_haar = [], [], [], []
     by_tone = {"mediapipe": {name: [] for name in TONE_BANDS}, "haar": {name: [] for name in TONE_BANDS}}
-    for frame, det, ours, theirs in zip(frames, detections, masks, segmented, strict=True):
+    luma_by_tone: dict[str, list[tuple[float, float]]] = {name: [] for name in TONE_BANDS}
+    lumas = lumas if lumas is not None else [None] * len(frames)
+    for frame, det, ours, theirs, luma in zip(frames, detections, masks, segmented, lumas, strict=True):
         d = frame["distance_m"]
         if frame["kind"] in ("face", "back"):
             mp_list, haar_list = (face_mp, face_haar) if frame["kind"] == "face" else (back_mp, back_haar)
             band = _tone_band(frame.get("skin_mst")) if frame["kind"] == "face" else None
+            if band and luma is not None:
+                luma_by_tone[band].append((luma, swatch_luma(frame["skin_mst"])))
             if d <= 2.0:
                 mp_list.append(_face_hit(det["face_short"], frame))
                 if band:
@@ -198,6 +236,16 @@ def score(frames: list[dict], detections: list[dict], masks: list[np.ndarray], s
         "face_from_behind_haar_1p5_2p5m": _share(back_haar),
         "faces_by_skin_tone": {
             judge: {band: _share(hits) for band, hits in bands.items() if hits} for judge, bands in by_tone.items()
+        },
+        "face_luma_by_skin_tone": {
+            band: {
+                "n": len(pairs),
+                "face_median": round(float(np.median([a for a, _ in pairs])), 3),
+                "swatch_median": round(float(np.median([b for _, b in pairs])), 3),
+                "face_over_swatch_median": round(float(np.median([a / b for a, b in pairs])), 3),
+            }
+            for band, pairs in luma_by_tone.items()
+            if pairs
         },
         "hog_2_8m": _share(hog),
         "hog_2_8m_window_fits": _share(hog_fits),
@@ -388,11 +436,17 @@ def main() -> None:
     detections = json.loads((out / "detections.json").read_text())
     masks = [cv2.imread(str(out / f"mask_{i:04d}.png"), cv2.IMREAD_GRAYSCALE) > 127 for i in range(len(frames))]
     segmented = [cv2.imread(str(out / f"seg_{i:04d}.png"), cv2.IMREAD_GRAYSCALE) > 127 for i in range(len(frames))]
+    lumas = [
+        face_luma(cv2.cvtColor(cv2.imread(str(out / f["file"])), cv2.COLOR_BGR2RGB), masks[i], f)
+        if f["kind"] == "face"
+        else None
+        for i, f in enumerate(frames)
+    ]
     record = {
         "bench": args.bench,
         "mediapipe": MEDIAPIPE_VERSION,
         "frames": {kind: sum(f["kind"] == kind for f in frames) for kind in ("body", "face", "back")},
-        **score(frames, detections, masks, segmented),
+        **score(frames, detections, masks, segmented, lumas),
         "targets": {
             "blazepose_found": 0.97,
             "blazepose_keypoints_within_10pct": 0.8,

@@ -57,7 +57,11 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
     theirs[100:400, 100:150] = True
     empty = np.zeros_like(ours)
     figures = people.score(
-        [near, far, face, back], detections, [ours, ours, empty, empty], [theirs, theirs] + [empty] * 2
+        [near, far, face, back],
+        detections,
+        [ours, ours, empty, empty],
+        [theirs, theirs] + [empty] * 2,
+        [None, None, 0.1, 0.3],
     )
     assert figures["blazepose_frame"]["found"] == {"n": 2, "hits": 1, "share": 0.5}
     assert figures["blazepose_frame"]["keypoints_within_10pct"] == {"n": 12, "hits": 10, "share": 0.833}
@@ -72,9 +76,33 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
         "mediapipe": {"MST 7-10": {"n": 1, "hits": 1, "share": 1.0}},
         "haar": {"MST 7-10": {"n": 1, "hits": 0, "share": 0.0}},
     }
+    # the mid-face luma of face frames only, against the luma of the avatar's skin swatch
+    swatch = people.swatch_luma(8.2)
+    assert 0.15 < swatch < 0.3  # between MST 8 (#604134) and MST 9 (#3a312a)
+    assert figures["face_luma_by_skin_tone"] == {
+        "MST 7-10": {
+            "n": 1,
+            "face_median": 0.1,
+            "swatch_median": round(swatch, 3),
+            "face_over_swatch_median": round(0.1 / swatch, 3),
+        }
+    }
     assert [people._tone_band(m) for m in (None, 1.0, 3.99, 4.0, 6.9, 7.0, 10.0)] == [
         None, "MST 1-4", "MST 1-4", "MST 4-7", "MST 4-7", "MST 7-10", "MST 7-10"
     ]  # fmt: skip
+
+
+def test_face_luma_reads_the_mid_face_patch_inside_the_person() -> None:
+    frame = {"kind": "face", "distance_m": 1.0, "focal_px": 500.0, "head_px": [100.0, 100.0]}
+    rgb = np.zeros((200, 200, 3), np.uint8)
+    mask = np.zeros((200, 200), bool)
+    rise = round(500.0 * people.FACE_PATCH_RISE_M)  # 30 px above the head joint at 1 m
+    rgb[100 - rise - 12 : 100 - rise + 12, 88:112] = (200, 100, 50)  # the patch: 25 px at 1 m
+    rgb[100 - rise - 6 : 100 - rise + 6, 94:106] = (255, 255, 255)  # a few bright pixels: not the median
+    mask[60:200, 60:140] = True
+    expected = (0.2126 * 200 + 0.7152 * 100 + 0.0722 * 50) / 255
+    assert people.face_luma(rgb, mask, frame) == pytest.approx(expected)
+    assert people.face_luma(rgb, np.zeros_like(mask), frame) is None  # nobody there
 
 
 def _detectors_ready() -> str | None:
