@@ -319,9 +319,12 @@ class Texels:
         """Group points (surfels, or finer texels with their ``weight``) into texels of ``h`` m on the grid ``lo``, ``dims``."""
         keys = cell_keys(pos, bucket, h, lo, dims)
         uniq, index = group_keys(keys)
-        w = np.ones((len(pos), 1)) if weight is None else np.asarray(weight, dtype=np.float64)[:, None]
-        count = sum_by(index, w, len(uniq))[:, 0]
-        total = sum_by(index, np.hstack([pos, normals]) * w, len(uniq)) / np.maximum(count, 1e-12)[:, None]
+        w = np.ones(len(pos)) if weight is None else np.ascontiguousarray(weight, dtype=np.float64)
+        count, sums = _weighted_sums(
+            index, np.ascontiguousarray(pos, dtype=np.float64), np.ascontiguousarray(normals, dtype=np.float64), w,
+            len(uniq),
+        )  # fmt: skip
+        total = sums / np.maximum(count, 1e-12)[:, None]
         return cls(h, lo, dims, uniq, index, total[:, :3], _unit(total[:, 3:]), count, _key_table(uniq))
 
     def find(self, keys: np.ndarray) -> np.ndarray:
@@ -481,6 +484,24 @@ def _sum_rows(index, values, k):  # pragma: no cover - compiled; twin: np.bincou
         for c in range(values.shape[1]):
             out[index[i], c] += values[i, c]
     return out
+
+
+@nb.njit(cache=True)
+def _weighted_sums(index, pos, normals, w, k):  # pragma: no cover - compiled; twin: sum_by of [pos, normals]·w
+    """Per group of ``index``: the sum of the weights ``w`` (k,) and of ``[pos, normals]·w`` rows (k, 6), in row order.
+
+    The products and additions of ``sum_by(index, np.hstack([pos, normals]) * w[:, None], k)``, without its
+    (N, 6) temporaries.
+    """
+    count = np.zeros(k)
+    sums = np.zeros((k, 6))
+    for i in range(len(index)):
+        g, wi = index[i], w[i]
+        count[g] += wi
+        for c in range(3):
+            sums[g, c] += pos[i, c] * wi
+            sums[g, 3 + c] += normals[i, c] * wi
+    return count, sums
 
 
 def group_keys(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

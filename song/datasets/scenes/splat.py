@@ -465,8 +465,8 @@ def synthesize_gaussians(
     thin = THIN_FACTOR * np.minimum(samples.s1, samples.s2) / WIDTH_FACTOR
     scales = np.column_stack([samples.s1, samples.s2, thin])
     cell = np.floor(samples.pos / SORT_CELL_M).astype(np.int64)
-    cell -= cell.min(axis=0)
-    span = cell.max(axis=0) + 1
+    cell -= np.array([cell[:, a].min() for a in range(3)]) if len(cell) else 0  # per column: axis-0 is slow
+    span = np.array([cell[:, a].max() for a in range(3)]) + 1 if len(cell) else np.ones(3, np.int64)
     key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
     order = np.argsort(key, kind="stable")  # x-major cells; generation order within a cell
     cloud = GaussianCloud(

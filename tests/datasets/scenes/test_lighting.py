@@ -279,6 +279,11 @@ def test_compiled_grouping_sums_blur_and_emitters_match_their_numpy_twins() -> N
     values = rng.normal(size=(60_000, 4))
     expected = np.column_stack([np.bincount(index, weights=values[:, c], minlength=len(uniq)) for c in range(4)])
     assert np.array_equal(lit.sum_by(index, values, len(uniq)), expected)  # same additions, same order: bit for bit
+    # a texel's weight and weighted position and normal sums, without the stacked temporaries: bit for bit
+    pos, nrm, w = values[:, :3], rng.normal(size=(60_000, 3)), rng.uniform(0.5, 3.0, 60_000)
+    count, sums = lit._weighted_sums(index, np.ascontiguousarray(pos), nrm, w, len(uniq))
+    assert np.array_equal(count, lit.sum_by(index, w[:, None], len(uniq))[:, 0])
+    assert np.array_equal(sums, lit.sum_by(index, np.hstack([pos, nrm]) * w[:, None], len(uniq)))
 
     # texels of points on a few axis planes: the blur against its numpy twin, bit for bit
     pts = rng.uniform(0.0, 3.0, (40_000, 3))
