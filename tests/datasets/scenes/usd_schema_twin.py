@@ -95,15 +95,8 @@ def _define_lights(stage, lights, used: set[str]) -> None:
         usd_prim.CreateAttribute("song:powerW", Sdf.ValueTypeNames.Float).Set(float(light.power_w))
 
 
-def usd_proxy_text(
-    solids: list[ProxyBox | ProxyMesh],
-    surfaces: list[ProxyMesh] = (),
-    dressing_json: str | None = None,
-    rooms: list[ProxyMesh] = (),
-    lights: list = (),
-    lighting_json: str | None = None,
-) -> str:
-    """The text ``write_usd_proxy`` must write for these arguments."""
+def usd_proxy_text(solids, surfaces=(), dressing_json=None, rooms=(), lights=(), lighting_json=None) -> str:
+    """The text ``write_usd_proxy`` must write for these arguments (the same, in the same order)."""
     from pxr import Gf, Usd, UsdGeom, UsdPhysics
 
     stage = Usd.Stage.CreateInMemory()
