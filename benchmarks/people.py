@@ -26,9 +26,10 @@ other pedestrians are left out, so each frame shows one person). 960×540, 70° 
   ~5 px) and on the person crop (square, side 1.25 × the box height), as a person detector would hand
   it over.
 - Faces: share of ``face`` frames where MediaPipe's short-range detector (run on a square crop of
-  side 0.6 m at the person's distance, centred on the head: a head-and-shoulders portrait, as a person
-  detector would hand it over) finds a face whose centre lies within 0.12 m (at the person's distance)
-  of the projected head joint; d ∈ [1, 2]. Target ≥ 70 %. OpenCV's Haar cascade on the whole frame,
+  side 0.6 m at the person's distance, centred on the head joint: a head-and-shoulders portrait, as a
+  person detector would hand it over) finds a face whose centre lies within 0.12 m (at the person's
+  distance) of the face's centre, 0.06 m above the projected head joint (the joint sits at the base of
+  the skull, level with the chin); d ∈ [1, 2]. Target ≥ 70 %. OpenCV's Haar cascade on the whole frame,
   d ∈ [1.5, 2.5]: target ≥ 50 %. The same shares on ``back`` frames are reported as false alarms.
 - HOG: share of ``body`` frames with a detection matching the person: IoU ≥ 0.5 between the two boxes
   at the pedestrian-detection convention (Caltech's: each box's height, width 0.41 × height; a HOG box
@@ -36,8 +37,7 @@ other pedestrians are left out, so each frame shows one person). 960×540, 70° 
   Also on the frames where HOG's window can hold the person at all (box height × 128/96 ≤ the frame's
   height: a person nearer than ~3.5 m fills the frame's height and no window fits).
 - Face brightness (``face_luma_by_skin_tone``): on ``face`` frames, the median display luma (Rec. 709 weights
-  on the sRGB values) of the mid-face patch (0.05 m square, 0.06 m above the head joint, which sits level
-  with the chin: nose and cheeks), by Monk band, against the luma of the avatar's skin swatch: how much
+  on the sRGB values) of the mid-face patch (0.05 m square on the face's centre: nose and cheeks), by Monk band, against the luma of the avatar's skin swatch: how much
   darker the scene's light renders a face than its swatch.
 - Segmentation: MediaPipe's person mask on a square crop (side 1.25 × the box height) against our
   alpha > 0.5, IoU inside the crop, ``body`` frames at d ∈ [2, 4]. Target ≥ 0.8 (median).
@@ -79,11 +79,12 @@ LIMBS = {
     28: "right_ankle",
 }
 FACE_TOLERANCE_M = 0.12
+# the face's centre (nose and cheeks, between the brows and the chin): this far above the head joint, which sits
+# at the base of the skull, level with the chin (0.875 of the height; the face centre is at ~0.91)
+FACE_CENTRE_RISE_M = 0.06
 HOG_WINDOW_RATIO = 128 / 96  # the HOG window's height over the person's height in its training crops
 FACE_CROP_M = 0.6
-# the mid-face patch (nose and cheeks, below the eyes, above the mouth): a square of this side, centred this
-# far above the head joint (which sits at the base of the skull, level with the chin), in metres
-FACE_PATCH_M, FACE_PATCH_RISE_M = 0.05, 0.06
+FACE_PATCH_M = 0.05  # the side of the mid-face patch whose luma is measured, centred on the face's centre
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 luma weights, applied to sRGB-encoded values
 
 
@@ -120,18 +121,23 @@ def _hog_person(det: list[float]) -> list[float]:
     return _standard([x, y + h / 8, x + w, y + 7 * h / 8])
 
 
-def _face_hit(boxes: list[list[float]], frame: dict) -> bool:
-    """A detected face (x, y, w, h, …) centred within the tolerance of the projected head joint."""
+def _face_centre(frame: dict) -> tuple[float, float]:
+    """The face's centre in a ``face``/``back`` frame: the head joint raised by :data:`FACE_CENTRE_RISE_M` (level camera)."""
     hx, hy = frame["head_px"]
+    return hx, hy - frame["focal_px"] * FACE_CENTRE_RISE_M / frame["distance_m"]
+
+
+def _face_hit(boxes: list[list[float]], frame: dict) -> bool:
+    """A detected face (x, y, w, h, …) centred within the tolerance of the face's centre (:func:`_face_centre`)."""
+    hx, hy = _face_centre(frame)
     tolerance = frame["focal_px"] * FACE_TOLERANCE_M / frame["distance_m"]
     return any(math.hypot(b[0] + b[2] / 2 - hx, b[1] + b[3] / 2 - hy) <= tolerance for b in boxes)
 
 
 def face_luma(rgb: np.ndarray, mask: np.ndarray, frame: dict) -> float | None:
     """Median display luma (0–1) of the mid-face patch of a ``face`` frame (level camera), inside our mask."""
-    f, d = frame["focal_px"], frame["distance_m"]
-    half = max(1, round(f * FACE_PATCH_M / d / 2))
-    cx, cy = round(frame["head_px"][0]), round(frame["head_px"][1] - f * FACE_PATCH_RISE_M / d)
+    half = max(1, round(frame["focal_px"] * FACE_PATCH_M / frame["distance_m"] / 2))
+    cx, cy = (round(c) for c in _face_centre(frame))
     window = (slice(max(cy - half, 0), cy + half), slice(max(cx - half, 0), cx + half))
     inside = mask[window]
     if inside.sum() < 4:

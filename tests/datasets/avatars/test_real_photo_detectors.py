@@ -42,14 +42,18 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
     for index, joint in people.LIMBS.items():
         x, y = near["joints_px"][joint]
         landmarks[index] = [x, y + (60.0 if index in (27, 28) else 0.0), 1.0]  # ankles 0.2 box heights off
+    # the face's centre is 0.06 m above the head joint: 20 px at 1.5 m, i.e. at (400, 180)
     face = {"kind": "face", "distance_m": 1.5, "focal_px": 500.0, "head_px": [400.0, 200.0], "skin_mst": 8.2}
     back = {**face, "kind": "back", "distance_m": 1.8}
+    assert people._face_centre(face) == pytest.approx((400.0, 180.0))
     tolerance = 500.0 * people.FACE_TOLERANCE_M / 1.5  # 40 px at 1.5 m
     detections = [
         {"pose": landmarks, "pose_crop": None, "hog": [[100, 100, 100, 300, 1.0]], "face_short": [], "haar": []},
         {"pose": None, "pose_crop": landmarks, "hog": [[500, 100, 100, 300, 1.0]], "face_short": [], "haar": []},
-        {"face_short": [[380.0, 180.0, 40.0, 40.0, 0.9]], "haar": [[392 + int(tolerance), 190, 20, 20]]},
-        {"face_short": [[380.0, 180.0, 40.0, 40.0, 0.9]], "haar": [[300, 150, 40, 40]]},
+        # MediaPipe's box centred 36 px below the face centre, on the chin and neck: within the tolerance;
+        # Haar's centred just beyond it
+        {"face_short": [[380.0, 196.0, 40.0, 40.0, 0.9]], "haar": [[392 + int(tolerance), 170, 20, 20]]},
+        {"face_short": [[380.0, 160.0, 40.0, 40.0, 0.9]], "haar": [[300, 150, 40, 40]]},
     ]
     ours = np.zeros((540, 960), bool)
     ours[100:400, 100:200] = True
@@ -96,7 +100,7 @@ def test_face_luma_reads_the_mid_face_patch_inside_the_person() -> None:
     frame = {"kind": "face", "distance_m": 1.0, "focal_px": 500.0, "head_px": [100.0, 100.0]}
     rgb = np.zeros((200, 200, 3), np.uint8)
     mask = np.zeros((200, 200), bool)
-    rise = round(500.0 * people.FACE_PATCH_RISE_M)  # 30 px above the head joint at 1 m
+    rise = round(500.0 * people.FACE_CENTRE_RISE_M)  # the face's centre: 30 px above the head joint at 1 m
     rgb[100 - rise - 12 : 100 - rise + 12, 88:112] = (200, 100, 50)  # the patch: 25 px at 1 m
     rgb[100 - rise - 6 : 100 - rise + 6, 94:106] = (255, 255, 255)  # a few bright pixels: not the median
     mask[60:200, 60:140] = True
