@@ -135,7 +135,9 @@ class _LayerWriter:
     """
 
     def __init__(self, Sdf, Vt) -> None:
-        self.Sdf, self.Vt = Sdf, Vt
+        from pxr import Gf
+
+        self.Sdf, self.Vt, self.Gf = Sdf, Vt, Gf
         self.layer = Sdf.Layer.CreateAnonymous(".usda")
         self.prims: dict[str, object] = {}
         self.looks: set[str] = set()
@@ -198,7 +200,7 @@ class _LayerWriter:
         if not self.looks:
             self.prim("/World/Looks", "Scope")
         self.looks.add(path)
-        types, Gf = self.Sdf.ValueTypeNames, _gf()
+        types, Gf = self.Sdf.ValueTypeNames, self.Gf
         look = self.prim(path, "Material")
         output = self.attribute(look, "outputs:surface", types.Token)
         output.connectionPathList.explicitItems = [self.Sdf.Path(f"{path}/surface.outputs:surface")]
@@ -219,7 +221,7 @@ class _LayerWriter:
         """
         import math
 
-        types, Gf = self.Sdf.ValueTypeNames, _gf()
+        types, Gf = self.Sdf.ValueTypeNames, self.Gf
         self.prim("/World/lights", "Scope")
         for light in lights:
             path = f"/World/lights/{_identifier(light.id, used)}"
@@ -247,12 +249,6 @@ class _LayerWriter:
             self.attribute(prim, "inputs:normalize", types.Bool, False)
             self.attribute(prim, "song:role", types.Token, light.role, custom=True)
             self.attribute(prim, "song:powerW", types.Float, float(light.power_w), custom=True)
-
-
-def _gf():
-    from pxr import Gf
-
-    return Gf
 
 
 def write_usd_proxy(
@@ -298,7 +294,7 @@ def write_usd_proxy(
         layer.defaultPrim = "World"
         physics = writer.prim("/World/physicsScene", "PhysicsScene")
         types = Sdf.ValueTypeNames
-        writer.attribute(physics, "physics:gravityDirection", types.Vector3f, _gf().Vec3f(0.0, 0.0, -1.0))
+        writer.attribute(physics, "physics:gravityDirection", types.Vector3f, writer.Gf.Vec3f(0.0, 0.0, -1.0))
         writer.attribute(physics, "physics:gravityMagnitude", types.Float, 9.81)
         writer.prim("/World/collision", "Scope")
         used: set[str] = set()
