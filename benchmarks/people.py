@@ -35,7 +35,8 @@ other pedestrians are left out, so each frame shows one person). 960×540, 70° 
   at the pedestrian-detection convention (Caltech's: each box's height, width 0.41 × height; a HOG box
   holds its person in the central 96 of its window's 128 rows). Target ≥ 95 %.
   Also on the frames where HOG's window can hold the person at all (box height × 128/96 ≤ the frame's
-  height: a person nearer than ~3.5 m fills the frame's height and no window fits).
+  height: a person nearer than ~3.5 m fills the frame's height and no window fits), and by distance
+  (``hog_by_distance``: 2–3, 3–4, 4–6, 6–8 m).
 - Face brightness (``face_luma_by_skin_tone``): on ``face`` frames, the median display luma (Rec. 709 weights
   on the sRGB values) of the mid-face patch (0.05 m square on the face's centre: nose and cheeks), by Monk band, against the luma of the avatar's skin swatch: how much
   darker the scene's light renders a face than its swatch.
@@ -152,6 +153,8 @@ def swatch_luma(mst: float) -> float:
     return float(skin_colour(mst) @ LUMA)
 
 
+HOG_BANDS = {"2-3 m": (2.0, 3.0), "3-4 m": (3.0, 4.0), "4-6 m": (4.0, 6.0), "6-8 m": (6.0, 8.0)}  # body frames
+
 TONE_BANDS = {"MST 1-4": (1.0, 4.0), "MST 4-7": (4.0, 7.0), "MST 7-10": (7.0, 10.0)}  # Monk Skin Tone places
 
 
@@ -185,6 +188,7 @@ def score(
     """
     pose = {"frame": ([], [], []), "crop": ([], [], [])}  # found, keypoints within 10 %, errors
     hog, hog_fits, seg = [], [], []
+    hog_by_band: dict[str, list[bool]] = {name: [] for name in HOG_BANDS}
     face_mp, face_haar, back_mp, back_haar = [], [], [], []
     by_tone = {"mediapipe": {name: [] for name in TONE_BANDS}, "haar": {name: [] for name in TONE_BANDS}}
     luma_by_tone: dict[str, list[tuple[float, float]]] = {name: [] for name in TONE_BANDS}
@@ -209,6 +213,9 @@ def score(
         box_h = box[3] - box[1]
         found = any(_iou_boxes(_standard(box), _hog_person(b)) >= 0.5 for b in det["hog"])
         hog.append(found)
+        band = next((name for name, (lo, hi) in HOG_BANDS.items() if lo <= d < hi), "6-8 m" if d >= 6.0 else None)
+        if band:
+            hog_by_band[band].append(found)
         if box_h * HOG_WINDOW_RATIO <= HEIGHT:
             hog_fits.append(found)
         if d >= 2.7:
@@ -255,6 +262,7 @@ def score(
         },
         "hog_2_8m": _share(hog),
         "hog_2_8m_window_fits": _share(hog_fits),
+        "hog_by_distance": {band: _share(hits) for band, hits in hog_by_band.items() if hits},
         "segmentation_iou_2_4m": {
             "n": len(seg),
             "median": round(float(np.median(seg)), 3) if seg else None,

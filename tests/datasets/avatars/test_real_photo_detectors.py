@@ -71,6 +71,9 @@ def test_figures_are_computed_from_the_raw_detections() -> None:
     assert figures["blazepose_frame"]["keypoints_within_10pct"] == {"n": 12, "hits": 10, "share": 0.833}
     assert figures["blazepose_crop"]["found"]["hits"] == 1  # the far frame's crop; its joints are the near one's
     assert figures["hog_2_8m"] == {"n": 2, "hits": 1, "share": 0.5}
+    by_distance = figures["hog_by_distance"]
+    assert set(by_distance) == {"3-4 m", "4-6 m"}  # the frames at 3 and 5 m
+    assert sum(b["n"] for b in by_distance.values()) == 2 and sum(b["hits"] for b in by_distance.values()) == 1
     assert figures["segmentation_iou_2_4m"] == {"n": 1, "median": 0.5, "p10": 0.5}
     assert figures["face_mediapipe_short_1_2m"]["hits"] == 1
     assert figures["face_haar_1p5_2p5m"]["hits"] == 0  # its centre lies just beyond the 0.12 m tolerance
