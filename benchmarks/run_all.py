@@ -68,6 +68,7 @@ BENCHMARKS: dict[str, tuple[list[str], tuple[str, ...]]] = {
     "batched_cameras": (["batched_cameras.py", "--bench", DEMO], ("demo",)),
     "closed_loop": (["closed_loop.py", "--bench", DEMO, "--episodes", "12"], ("demo",)),
     "gym_env": (["gym_env.py", "--bench", DEMO], ("demo",)),
+    "collect": (["collect.py", "--bench", DEMO, "--limit", "12", "--workers", "2"], ("demo",)),
     "camera": (["camera.py", "--bench", DEMO], ("demo",)),
     "reactive": (["reactive.py", "--bench", DEMO, "--episodes", "40"], ("demo",)),
     "trust": (["trust.py", "--bench", DEMO], ("demo",)),
