@@ -158,11 +158,14 @@ HOG_BANDS = {"2-3 m": (2.0, 3.0), "3-4 m": (3.0, 4.0), "4-6 m": (4.0, 6.0), "6-8
 TONE_BANDS = {"MST 1-4": (1.0, 4.0), "MST 4-7": (4.0, 7.0), "MST 7-10": (7.0, 10.0)}  # Monk Skin Tone places
 
 
+def _band(x: float, bands: dict[str, tuple[float, float]]) -> str:
+    """The first band whose upper end lies above ``x``; the last band holds its own upper end."""
+    return next((name for name, (_, hi) in bands.items() if x < hi), list(bands)[-1])
+
+
 def _tone_band(mst: float | None) -> str | None:
     """The band of a place on the Monk Skin Tone scale (None for an avatar without one)."""
-    if not mst:
-        return None
-    return next((name for name, (_, hi) in TONE_BANDS.items() if mst < hi), "MST 7-10")  # 10 is in the last
+    return _band(mst, TONE_BANDS) if mst else None
 
 
 def _share(hits: list[bool]) -> dict:
@@ -213,9 +216,7 @@ def score(
         box_h = box[3] - box[1]
         found = any(_iou_boxes(_standard(box), _hog_person(b)) >= 0.5 for b in det["hog"])
         hog.append(found)
-        band = next((name for name, (lo, hi) in HOG_BANDS.items() if lo <= d < hi), "6-8 m" if d >= 6.0 else None)
-        if band:
-            hog_by_band[band].append(found)
+        hog_by_band[_band(d, HOG_BANDS)].append(found)
         if box_h * HOG_WINDOW_RATIO <= HEIGHT:
             hog_fits.append(found)
         if d >= 2.7:

@@ -546,6 +546,17 @@ def _group_keys(keys):  # pragma: no cover - compiled; twin: np.unique(return_in
     return distinct[order], index
 
 
+def column_bounds(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-column minima and maxima of a non-empty (N, C) array, as ``min(axis=0)`` and ``max(axis=0)``.
+
+    Column by column: numpy's axis-0 reductions of an (N, 3) array are about 20× slower.
+    """
+    return (
+        np.array([values[:, a].min() for a in range(values.shape[1])]),
+        np.array([values[:, a].max() for a in range(values.shape[1])]),
+    )
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
 
@@ -787,9 +798,11 @@ def bake(
     emissive, which = emissive_mask(pos, normals, table)
     bucket = buckets(normals)
     # an odd offset keeps the usual planes (z = 0, the ceiling, walls on grid lines) off the cell boundaries
-    # per column: numpy's axis-0 reductions of an (N, 3) array are 20× slower
-    lo = np.array([pos[:, a].min() for a in range(3)]) - 2 * COARSE_M - 0.0137 if n else np.zeros(3)
-    span = (np.array([pos[:, a].max() for a in range(3)]) + 2 * COARSE_M - lo) if n else np.ones(3)
+    lo, span = np.zeros(3), np.ones(3)
+    if n:
+        low, high = column_bounds(pos)
+        lo = low - 2 * COARSE_M - 0.0137
+        span = high + 2 * COARSE_M - lo
     dims = np.ceil(span / DEPTH_M).astype(np.int64) + 1  # bounds every axis at either cell size
     fine = Texels.of(pos, normals, bucket, TEXEL_M, lo, dims)
     fine_bucket = buckets(fine.normal)

@@ -439,6 +439,7 @@ def synthesize_gaussians(
     Cycles comparison needs. Returns the cloud and the bake (None when unlit).
     """
     from song.datasets.scenes.lighting import bake as bake_light
+    from song.datasets.scenes.lighting import column_bounds
     from song.datasets.scenes.materials import srgb_to_linear
 
     rng = derive_rng(dressing.seed, "splat", dressing.grid.shape, dressing.venue)
@@ -465,8 +466,9 @@ def synthesize_gaussians(
     thin = THIN_FACTOR * np.minimum(samples.s1, samples.s2) / WIDTH_FACTOR
     scales = np.column_stack([samples.s1, samples.s2, thin])
     cell = np.floor(samples.pos / SORT_CELL_M).astype(np.int64)
-    cell -= np.array([cell[:, a].min() for a in range(3)]) if len(cell) else 0  # per column: axis-0 is slow
-    span = np.array([cell[:, a].max() for a in range(3)]) + 1 if len(cell) else np.ones(3, np.int64)
+    low, high = column_bounds(cell)
+    cell -= low
+    span = high - low + 1
     key = (cell[:, 0] * span[1] + cell[:, 1]) * span[2] + cell[:, 2]
     order = np.argsort(key, kind="stable")  # x-major cells; generation order within a cell
     cloud = GaussianCloud(

@@ -122,6 +122,7 @@ def run_binding(ctx: StageContext) -> list[str]:
     out_dir.mkdir(parents=True)
     picks = identity_picks(ctx.config, ctx.scene_id, _scene_ped_ids(scene, [k for k, _ in motions]), len(pool))
     entries, written = [], []
+    full: dict[Path, AvatarAsset] = {}  # whole assets, for materialised caches: read once per identity per scene
     for ped_id, motion in motions:
         path = pool[picks[ped_id]]
         identity = _verified_identity(path)
@@ -132,7 +133,9 @@ def run_binding(ctx: StageContext) -> list[str]:
         materialized = None
         if cfg.materialize:
             materialized = MATERIALIZED_FILE.format(ped_id=ped_id)
-            write_materialized_cache(scene.path(materialized), load_avatar(path).scaled(cache.meta["scale"]), cache)
+            if path not in full:
+                full[path] = load_avatar(path)
+            write_materialized_cache(scene.path(materialized), full[path].scaled(cache.meta["scale"]), cache)
             written.append(materialized)
         entries.append(
             BindingRecord(
