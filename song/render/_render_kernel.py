@@ -8,7 +8,8 @@ this is numba and not numpy:
    covariance dilation by ``eps2d`` (0.3 px²), conic, opacity cull below 1/255, the opacity-aware tight
    box (extent min(3.33, √(2 ln(255·o))) σ per axis: exactly where α ≥ 1/255), image cull, colour from
    SH (degree ≤ 3, + 0.5, clamped at 0) along the view direction, and the tile rectangle.
-2. :func:`bin_kernel`: every visible Gaussian, already in depth order, appended to the list of each
+2. :func:`depth_order` (a parallel stable radix sort of the depths), then :func:`bin_kernel`: every
+   visible Gaussian, already in depth order, appended to the list of each
    16×16 tile its box touches (count, prefix sum, fill), so each tile's list is front to back.
 3. :func:`composite_kernel` (parallel over tiles): per pixel centre, front to back,
    α = min(0.999, o·exp(−σ)) skipped when σ < 0 or α < 1/255; stop (exclusive) once the transmittance
@@ -207,29 +208,45 @@ def project_kernel(means, quats, scales, opacities, log_alpha, sh, degree, sel, 
         valid[o] = rect[o, 1] > rect[o, 0] and rect[o, 3] > rect[o, 2]
 
 
-@numba.njit(cache=True)
-def depth_order(index, depth):
-    """``index`` sorted by ``depth[index]`` (positive float32 depths), stable: a 2 × 16-bit LSD radix sort.
+RADIX_BITS = 11  # three passes cover a float32's 31 magnitude bits; 2,048 buckets a pass stay in cache
 
-    Ties keep the input order, as gsplat's stable radix sort of its depth keys does.
+
+@numba.njit(cache=True, parallel=True)
+def depth_order(index, depth, n_parts):
+    """``index`` sorted by ``depth[index]`` (positive float32 depths), stable: a 3 × 11-bit LSD radix sort.
+
+    Ties keep the input order, as gsplat's stable radix sort of its depth keys does. Each pass is a
+    parallel counting sort (as in :func:`bin_kernel`): part k counts its contiguous slice, a prefix sum
+    over (bucket, part) places every part in every bucket, and each part scatters its slice in order; a
+    stable order is unique, so the result does not depend on ``n_parts`` or the thread count.
     """
     n = index.shape[0]
     keys = np.empty(n, dtype=np.uint32)
-    for k in range(n):
+    for k in prange(n):
         keys[k] = np.float32(depth[index[k]]).view(np.uint32)  # positive floats order as their bits
     src_i, src_k = index.copy(), keys
     dst_i, dst_k = np.empty_like(src_i), np.empty_like(keys)
-    for shift in (0, 16):
-        counts = np.zeros(65537, dtype=np.int64)
-        for k in range(n):
-            counts[((src_k[k] >> shift) & 0xFFFF) + 1] += 1
-        for b in range(65536):
-            counts[b + 1] += counts[b]
-        for k in range(n):
-            b = (src_k[k] >> shift) & 0xFFFF
-            dst_i[counts[b]] = src_i[k]
-            dst_k[counts[b]] = src_k[k]
-            counts[b] += 1
+    bounds = np.linspace(0, n, n_parts + 1).astype(np.int64)
+    buckets = 1 << RADIX_BITS
+    mask = np.uint32(buckets - 1)
+    for shift in range(0, 32, RADIX_BITS):
+        place = np.zeros((n_parts, buckets), dtype=np.int64)
+        for p in prange(n_parts):
+            for k in range(bounds[p], bounds[p + 1]):
+                place[p, (src_k[k] >> shift) & mask] += 1
+        running = 0
+        for b in range(buckets):
+            for p in range(n_parts):
+                count = place[p, b]
+                place[p, b] = running
+                running += count
+        for p in prange(n_parts):
+            fill = place[p]
+            for k in range(bounds[p], bounds[p + 1]):
+                b = (src_k[k] >> shift) & mask
+                dst_i[fill[b]] = src_i[k]
+                dst_k[fill[b]] = src_k[k]
+                fill[b] += 1
         src_i, dst_i = dst_i, src_i
         src_k, dst_k = dst_k, src_k
     return src_i
@@ -293,7 +310,13 @@ def composite_kernel(offsets, ids, attr, width, height, tiles_x, tiles_y, backgr
     """
     n_tiles = offsets.shape[0] - 1
     per_camera = tiles_x * tiles_y
-    for t in prange(n_tiles):
+    rows = n_tiles // tiles_x
+    evens = (rows + 1) // 2
+    for q in prange(n_tiles):
+        # even tile rows first, then odd ones: the threads' contiguous shares of the loop each hold rows
+        # from the whole image (a top half of ceiling and a bottom half of floor and people cost unequally)
+        k, col = q // tiles_x, q % tiles_x
+        t = (2 * k if k < evens else 2 * (k - evens) + 1) * tiles_x + col
         cam, local = t // per_camera, t % per_camera
         x0 = (local % tiles_x) * TILE
         y0 = (local // tiles_x) * TILE

@@ -35,7 +35,7 @@ EPS2D = 0.3  # px², the 2-D covariance dilation (gsplat's eps2d)
 CULL_MARGIN_PX = 2.0  # chunks are kept when their box reaches this close to the image edge
 BACKENDS = ("auto", "numba", "gsplat", "reference")  # the built-ins; plugins add more (song.plugins)
 WHOLE_SET = 65_536  # sets this small skip chunk culling (bounds would cost more than they save)
-BIN_PARTS = 8  # slices of the depth order binned in parallel (a fixed count: the lists do not depend on threads)
+BIN_PARTS = 8  # slices of the depth order sorted and binned in parallel (a fixed count: nothing depends on threads)
 
 
 def visible_chunks(gaussians: GaussianSet, camera: Camera) -> np.ndarray:
@@ -127,7 +127,7 @@ def tile_lists(views: Sequence[tuple[Sequence[GaussianSet], Camera]], lap=lambda
     # each camera's visible Gaussians by depth (ties by input order), the cameras one after another
     order = np.concatenate(
         [
-            kernel.depth_order(lo + np.flatnonzero(valid[lo:hi]), depth)
+            kernel.depth_order(lo + np.flatnonzero(valid[lo:hi]), depth, BIN_PARTS)
             for lo, hi in zip(bounds[:-1], bounds[1:], strict=True)
         ]
     )

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from song.render import GaussianSet, look_at, render, robot_camera
-from song.render._render_kernel import ALPHA_MAX, exp_neg
+from song.render._render_kernel import ALPHA_MAX, depth_order, exp_neg
 from song.render.gaussians import SH_C0
 from tests.conftest import SHARED
 
@@ -116,6 +116,20 @@ def test_fast_exponential() -> None:
     x = np.linspace(0.0, 39.0, 100_001)
     rel = np.array([exp_neg(v) for v in x[::97]]) / np.exp(-x[::97]) - 1
     assert np.abs(rel).max() < 1e-8
+
+
+@pytest.mark.parametrize("n_parts", [1, 3, 8])
+def test_depth_order_is_a_stable_sort(n_parts: int) -> None:
+    """The radix sort equals numpy's stable argsort of the float32 depths, ties in input order, any split."""
+    rng = np.random.default_rng(n_parts)
+    depth = rng.uniform(0.05, 200.0, 50_000)
+    depth[::7] = depth[3]  # a long run of ties
+    depth[1::11] = np.float32(2.0**-20)  # tiny and huge keys exercise every pass
+    depth[2::13] = 3e7
+    index = np.flatnonzero(rng.random(len(depth)) < 0.7)
+    want = index[np.argsort(depth[index].astype(np.float32), kind="stable")]
+    np.testing.assert_array_equal(depth_order(index, depth, n_parts), want)
+    assert len(depth_order(index[:0], depth, n_parts)) == 0
 
 
 def _box_room(spacing: float = 0.01) -> tuple[GaussianSet, tuple[float, float, float]]:
