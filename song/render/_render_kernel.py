@@ -254,7 +254,7 @@ def depth_order(index, depth, n_parts):
 
 @numba.njit(cache=True, parallel=True)
 def bin_kernel(order, rect, tiles_x, tiles_y, n_parts):
-    """Tile lists front to back: ``(offsets (T + 1,), ids (E,))``; ``order`` lists the visible Gaussians by depth.
+    """Tile lists front to back: ``(offsets (T + 1,), ids (E,) int32)``; ``order`` lists the visible Gaussians by depth.
 
     A parallel counting sort: part k counts the tiles of its contiguous slice of ``order``, a prefix
     sum over (tile, part) gives every part its place in every tile's list, and each part then fills its
@@ -282,7 +282,7 @@ def bin_kernel(order, rect, tiles_x, tiles_y, n_parts):
             start[k, t] = running
             running += counts[k, t]
     offsets[n_tiles] = running
-    ids = np.empty(running, dtype=np.int64)
+    ids = np.empty(running, dtype=np.int32)  # row ids: half the bytes the compositing reads per entry
     for k in prange(n_parts):
         fill = start[k]
         for q in range(bounds[k], bounds[k + 1]):

@@ -105,6 +105,8 @@ def tile_lists(views: Sequence[tuple[Sequence[GaussianSet], Camera]], lap=lambda
     selections = [[(s, visible_chunks(s, camera)) for s in sets if len(s)] for sets, camera in views]
     lap("cull")
     total = sum(len(sel) for view in selections for _, sel in view)
+    if total >= 2**31:  # the tile lists hold row ids as int32
+        raise ValueError(f"{total} Gaussians in one render call: at most 2**31 - 1")
     attr = np.empty((total, kernel.N_ATTR), dtype=np.float32)  # half the memory traffic of float64
     depth = np.empty(total)
     rect = np.empty((total, 4), dtype=np.int64)
