@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from shapely.geometry import Polygon
 
 from song.datasets.scenes import ScenePackage
-from song.geometry.freespace import clearance_field, largest_component, walkable_cells
+from song.geometry.freespace import clearance_field, largest_component, navmesh_min_width_cells, open_passages
 from song.geometry.grid import sample_mask
 from song.geometry.gridpath import GridGraph, distances_from_many, grid_graph
 
@@ -33,6 +33,7 @@ class Walkable:
     coarse_factor: int
     coarse: GridGraph
     clearance: np.ndarray  # (rows, cols) distance to the nearest obstacle, m
+    _rows: dict = field(default_factory=dict, repr=False)  # coarse start cell → its distance row (cells)
 
     @property
     def area_m2(self) -> float:
@@ -50,10 +51,20 @@ class Walkable:
         return rc
 
     def geodesics_from(self, starts: np.ndarray) -> tuple[np.ndarray, float]:
-        """(S, n) coarse geodesic distances (m) from several points (S, 2), one compiled call."""
+        """(S, n) coarse geodesic distances (m) from several points (S, 2).
+
+        The starts not asked for before share one compiled call; a start cell's row is kept, since the
+        stage asks again from the same spots (a Dijkstra is deterministic, so a kept row is the row).
+        """
         res = self.package.occupancy.resolution * self.coarse_factor
-        cells = np.array([self._coarse_cell(p) for p in np.asarray(starts)]).reshape(-1, 2)
-        return distances_from_many(self.coarse, cells) * res, res
+        keys = [tuple(int(v) for v in self._coarse_cell(p)) for p in np.asarray(starts)]
+        new = list(dict.fromkeys(k for k in keys if k not in self._rows))
+        if new:
+            for key, row in zip(new, distances_from_many(self.coarse, np.array(new)), strict=True):
+                self._rows[key] = row
+        if not keys:
+            return np.zeros((0, len(self.coarse.cells))), res
+        return np.stack([self._rows[k] for k in keys]) * res, res
 
     def geodesic(self, dist: np.ndarray, goal: np.ndarray) -> float:
         """The coarse geodesic distance (m) to ``goal`` from a row of :meth:`geodesics_from`; inf off the graph."""
@@ -70,7 +81,8 @@ def walkable(package: ScenePackage, radius: float, contour_error: float) -> Walk
     """
     grid = package.occupancy
     room = clearance_field(grid.free, grid.resolution)
-    legal = walkable_cells(grid.free, grid.resolution, radius, contour_error)
+    # walkable_cells, from the field computed once
+    legal = open_passages(room >= radius, navmesh_min_width_cells(grid.resolution, contour_error))
     main = largest_component(legal)
     factor = max(1, int(round(COARSE_M / grid.resolution)))
     rows, cols = main.shape

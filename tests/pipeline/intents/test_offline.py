@@ -9,6 +9,8 @@ import numpy as np
 
 from song.config import SongConfig
 from song.datasets.scenes import load_scene_package
+from song.geometry.freespace import walkable_cells
+from song.geometry.gridpath import distances_from_many
 from song.pipeline.intents import generate_intents
 from song.pipeline.intents.navigation import walkable
 from song.pipeline.intents.offline import venue_vocabulary
@@ -34,6 +36,26 @@ def test_same_seed_same_intents_and_endpoints_reachable() -> None:
     gaps = np.linalg.norm(starts[:, None] - starts[None], axis=-1) + np.eye(len(starts)) * 9
     assert gaps.min() >= config.intents.min_spawn_separation_m
     assert all(r.reason for r in a.rejected)
+
+
+def test_walkable_rows_are_fresh_dijkstra_rows() -> None:
+    """Kept distance rows equal a fresh search, in any order and with repeats; ``legal`` is walkable_cells."""
+    package = load_scene_package(SAMPLES / "procthor_house_19")
+    config = SongConfig()
+    walk = walkable(package, config.crowd.agent_radius_m, config.crowd.contour_error_m)
+    grid = package.occupancy
+    np.testing.assert_array_equal(
+        walk.legal,
+        walkable_cells(grid.free, grid.resolution, config.crowd.agent_radius_m, config.crowd.contour_error_m),
+    )
+    cells = walk.coarse.cells[:: max(1, len(walk.coarse.cells) // 5)][:5]
+    res = grid.resolution * walk.coarse_factor
+    points = grid.to_world(cells * walk.coarse_factor)  # a fine cell inside each coarse start cell
+    first, _ = walk.geodesics_from(points[[0, 1, 1]])
+    again, _ = walk.geodesics_from(points[[2, 1, 0, 3, 4]])
+    fresh = distances_from_many(walk.coarse, np.array([walk._coarse_cell(p) for p in points])) * res
+    np.testing.assert_array_equal(first, fresh[[0, 1, 1]])
+    np.testing.assert_array_equal(again, fresh[[2, 1, 0, 3, 4]])
 
 
 def test_venues_have_different_vocabularies(make_scene) -> None:
