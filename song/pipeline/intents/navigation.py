@@ -33,7 +33,7 @@ class Walkable:
     coarse_factor: int
     coarse: GridGraph
     clearance: np.ndarray  # (rows, cols) distance to the nearest obstacle, m
-    _rows: dict = field(default_factory=dict, repr=False)  # coarse start cell → its distance row (cells)
+    _rows: dict = field(default_factory=dict, repr=False, compare=False)  # coarse start cell → distance row (cells)
 
     @property
     def area_m2(self) -> float:
