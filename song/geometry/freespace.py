@@ -77,6 +77,12 @@ def largest_component(mask: np.ndarray) -> np.ndarray:
     return labels == int(np.argmax(sizes)) + 1
 
 
-def walkable_cells(free: np.ndarray, resolution: float, radius: float, contour_error: float) -> np.ndarray:
-    """Legal pedestrian centres as the crowd's navmesh sees them: eroded by ``radius``, narrow strips removed."""
-    return open_passages(erode(free, resolution, radius), navmesh_min_width_cells(resolution, contour_error))
+def walkable_cells(
+    free: np.ndarray, resolution: float, radius: float, contour_error: float, clearance: np.ndarray | None = None
+) -> np.ndarray:
+    """Legal pedestrian centres as the crowd's navmesh sees them: eroded by ``radius``, narrow strips removed.
+
+    ``clearance``: ``free``'s :func:`clearance_field`, when the caller has it already.
+    """
+    room = clearance_field(free, resolution) if clearance is None else clearance
+    return open_passages(room >= radius, navmesh_min_width_cells(resolution, contour_error))

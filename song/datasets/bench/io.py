@@ -84,9 +84,7 @@ class BlobStore:
                     size += len(block)
             sha = digest.hexdigest()
             rel = BLOB_PATH.format(prefix=sha[:2], sha256=sha, ext="".join(source.suffixes[-1:]))
-            if rel in self._known:
-                staging.unlink()
-            else:
+            if rel not in self._known:  # known content: the staged copy is dropped below
                 target = self.root / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
                 os.replace(staging, target)

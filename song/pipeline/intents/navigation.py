@@ -8,7 +8,7 @@ import numpy as np
 from shapely.geometry import Polygon
 
 from song.datasets.scenes import ScenePackage
-from song.geometry.freespace import clearance_field, largest_component, navmesh_min_width_cells, open_passages
+from song.geometry.freespace import clearance_field, largest_component, walkable_cells
 from song.geometry.grid import sample_mask
 from song.geometry.gridpath import GridGraph, distances_from_many, grid_graph
 
@@ -58,12 +58,12 @@ class Walkable:
         """
         res = self.package.occupancy.resolution * self.coarse_factor
         keys = [tuple(int(v) for v in self._coarse_cell(p)) for p in np.asarray(starts)]
+        if not keys:
+            return np.zeros((0, len(self.coarse.cells))), res
         new = list(dict.fromkeys(k for k in keys if k not in self._rows))
         if new:
             for key, row in zip(new, distances_from_many(self.coarse, np.array(new)), strict=True):
                 self._rows[key] = row
-        if not keys:
-            return np.zeros((0, len(self.coarse.cells))), res
         return np.stack([self._rows[k] for k in keys]) * res, res
 
     def geodesic(self, dist: np.ndarray, goal: np.ndarray) -> float:
@@ -81,8 +81,7 @@ def walkable(package: ScenePackage, radius: float, contour_error: float) -> Walk
     """
     grid = package.occupancy
     room = clearance_field(grid.free, grid.resolution)
-    # walkable_cells, from the field computed once
-    legal = open_passages(room >= radius, navmesh_min_width_cells(grid.resolution, contour_error))
+    legal = walkable_cells(grid.free, grid.resolution, radius, contour_error, clearance=room)
     main = largest_component(legal)
     factor = max(1, int(round(COARSE_M / grid.resolution)))
     rows, cols = main.shape
